@@ -1,0 +1,257 @@
+"""The knowledge model: what a knowledge file says, as frozen pydantic values.
+
+Two layers:
+
+* the *document* (:class:`KnowledgeDocument`) is what a file says, class by class,
+  with every per-class field optional so that a subclass can leave it to its
+  parent (paper 002, Section IV: object descriptions with is-a relations);
+* the *resolved* knowledge (:class:`Knowledge`, built by
+  :func:`semwm.knowledge.resolve.resolve`) has inheritance applied once, every
+  value checked against the world's dimension, and is what the filter factory
+  and the MHF read.
+
+Units: seconds, metres, frequencies in Hz (events per second).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+Matrix = tuple[tuple[float, ...], ...]
+"""A matrix as a tuple of rows. Checked for shape and definiteness on resolution."""
+
+NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+Probability = Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
+
+MotionOrder = Literal["zeroth_order", "first_order"]
+"""``zeroth_order``: constant position; ``first_order``: constant velocity."""
+
+Category = Literal["static", "passive", "actively_controlled", "foreign_controlled"]
+"""Object categories of paper 004, Section II."""
+
+
+class Frozen(BaseModel):
+    """Base of every knowledge value: immutable, unknown keys rejected."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class WorldSettings(Frozen):
+    """Settings of the MHF as a whole.
+
+    Attributes
+    ----------
+    dimension
+        2 or 3: the dimension of every position.
+    pruning_ratio
+        Paper 002 eq. (3), the ratio alpha: a hypothesis whose probability is below
+        ``alpha * max p`` is pruned. Paper 000 (C1) uses 0.01.
+    max_hypotheses
+        n_hyp,max: at most this many hypotheses are kept (paper 000 uses 1000).
+    association_model
+        ``paper``: the scaled likelihood of paper 002 eq. (8) with frequency priors
+        (eqs. 5-7). ``mht``: the standard MHT model (innovation density N(z; Hx, S),
+        clutter and birth rates spread over ``region``).
+    gate_probability
+        Mahalanobis gate: an object further than the chi-square quantile of this
+        probability from a detection spawns no association. 1.0 disables gating.
+    region
+        The observation region as one ``[min, max]`` pair per axis (metres); its
+        volume spreads clutter and new objects in the ``mht`` model. Optional for
+        ``paper``.
+    default_detector
+        Detector assumed when a detection names none; defaults to the first detector.
+    """
+
+    dimension: Literal[2, 3] = 3
+    pruning_ratio: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.01
+    max_hypotheses: Annotated[int, Field(ge=1)] = 1000
+    association_model: Literal["paper", "mht"] = "paper"
+    gate_probability: Annotated[float, Field(gt=0.0, le=1.0)] = 0.9999
+    region: tuple[tuple[float, float], ...] | None = None
+    default_detector: str | None = None
+
+
+class MotionModelSpec(Frozen):
+    """One motion model and its system noise.
+
+    ``system_noise`` is the d x d spectral density Q_c of the white noise driving
+    the model: velocity noise (m^2/s) for ``zeroth_order``, acceleration noise
+    (m^2/s^3) for ``first_order``. Q(dt) is built from it in
+    :mod:`semwm.filters.motion`.
+    """
+
+    motion_model: MotionOrder
+    system_noise: Matrix
+
+
+class KalmanFilterSpec(Frozen):
+    """A Kalman filter with one motion model (paper 002 IV-B: static classes)."""
+
+    type: Literal["kalman"] = "kalman"
+    model: MotionModelSpec
+
+
+class IMMFilterSpec(Frozen):
+    """An interacting multiple model filter (paper 002 IV-B: moving classes).
+
+    The common state is position and velocity. A ``zeroth_order`` model inside an
+    IMM keeps the position, resets the velocity to zero and gives it the variance
+    ``stationary_velocity_variance`` (m^2/s^2), so that its covariance stays
+    positive definite.
+
+    ``transition_matrix[i][j]`` is P(mode j at step k | mode i at step k-1): rows
+    sum to 1, and it applies once per prediction step.
+    """
+
+    type: Literal["imm"] = "imm"
+    models: Annotated[tuple[MotionModelSpec, ...], Field(min_length=2)]
+    transition_matrix: Matrix
+    initial_mode_probabilities: tuple[float, ...] | None = None
+    stationary_velocity_variance: Positive = 1e-4
+
+
+FilterSpec = Annotated[KalmanFilterSpec | IMMFilterSpec, Field(discriminator="type")]
+
+
+class AppearanceRelation(Frozen):
+    """"A <class> appears within ``max_distance`` of a ``target`` every 1/frequency s".
+
+    Paper 002 eq. (4): f_new(o, h) = max over o' in h of f_presence(o, o').
+    """
+
+    target: str
+    max_distance: Positive
+    frequency: NonNegative
+
+
+class ClassSpec(Frozen):
+    """One object class as written in a knowledge file.
+
+    Every field but ``name`` may be left out: it is then inherited from the
+    ``is_a`` parent(s) (the first parent that defines it, depth first).
+
+    Attributes
+    ----------
+    detection_frequency
+        f_existing (paper 002 eq. 6): how often (Hz) a known object of this class is
+        detected.
+    new_frequency
+        The base rate (Hz) at which new objects of this class appear anywhere, the
+        fallback of eq. (4) when no appearance relation applies.
+    appearance
+        Appearance relations (eq. 4).
+    filter
+        The tracking filter (Kalman or IMM) and its system noise.
+    measurement_noise
+        R, d x d (m^2), unless a detector overrides it for this class.
+    initial_covariance
+        Position covariance of a new object, d x d (m^2). Defaults to the
+        measurement noise.
+    initial_velocity_covariance
+        Velocity covariance of a new object, d x d (m^2/s^2), for filters with
+        velocity. New objects start with zero velocity (paper 002 III-A).
+    max_position_variance
+        P_max (paper 002 III-E): an object whose position covariance has an
+        eigenvalue above this (m^2) is removed from every hypothesis.
+    max_time_without_update
+        Paper 000 C3: an object not updated for this long (s) is removed.
+    category
+        Paper 004's object category.
+    """
+
+    name: str
+    is_a: tuple[str, ...] = ()
+    detection_frequency: NonNegative | None = None
+    new_frequency: NonNegative | None = None
+    appearance: tuple[AppearanceRelation, ...] | None = None
+    filter: FilterSpec | None = None
+    measurement_noise: Matrix | None = None
+    initial_covariance: Matrix | None = None
+    initial_velocity_covariance: Matrix | None = None
+    max_position_variance: Positive | None = None
+    max_time_without_update: Positive | None = None
+    category: Category | None = None
+
+
+class DetectorSpec(Frozen):
+    """A detector (a sensor with its detection algorithm).
+
+    Attributes
+    ----------
+    clutter_frequency
+        f_clutter (paper 002 eq. 5): false detections per second.
+    measurement_noise
+        Per-class R overriding the class's own, class name -> d x d (m^2).
+    range
+        Paper 000 C2: detections farther than this (m) from the sensor position
+        are not used.
+    """
+
+    name: str
+    clutter_frequency: NonNegative
+    measurement_noise: Mapping[str, Matrix] = Field(default_factory=dict)
+    range: Positive | None = None
+
+
+class KnownObject(Frozen):
+    """An object known from a map, e.g. a door: always present as a target of
+    appearance relations; not tracked and not part of the world output."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
+
+    cls: str = Field(alias="class")
+    position: tuple[float, ...]
+    name: str | None = None
+
+
+class KnowledgeDocument(Frozen):
+    """A knowledge base as written: world settings, classes, detectors, map."""
+
+    world: WorldSettings = Field(default_factory=WorldSettings)
+    classes: tuple[ClassSpec, ...]
+    detectors: Annotated[tuple[DetectorSpec, ...], Field(min_length=1)]
+    known_objects: tuple[KnownObject, ...] = ()
+
+
+class ResolvedClass(Frozen):
+    """A class with inheritance applied and every value checked: what the factory reads."""
+
+    name: str
+    parents: tuple[str, ...]
+    ancestors: tuple[str, ...]
+    detection_frequency: float
+    new_frequency: float
+    appearance: tuple[AppearanceRelation, ...]
+    filter: FilterSpec
+    measurement_noise: Matrix
+    initial_covariance: Matrix
+    initial_velocity_covariance: Matrix
+    max_position_variance: float | None
+    max_time_without_update: float | None
+    category: Category | None
+
+
+class Knowledge(Frozen):
+    """Resolved knowledge: the only form the factory and the MHF see."""
+
+    world: WorldSettings
+    classes: Mapping[str, ResolvedClass]
+    detectors: Mapping[str, DetectorSpec]
+    known_objects: tuple[KnownObject, ...]
+    document: KnowledgeDocument
+    source: str | None = None
+
+    @property
+    def dimension(self) -> int:
+        return self.world.dimension
+
+    @property
+    def default_detector(self) -> str:
+        if self.world.default_detector is not None:
+            return self.world.default_detector
+        return next(iter(self.detectors))
