@@ -1,0 +1,172 @@
+"""The filter factory: the one place that reads class knowledge and builds filters.
+
+``FilterFactory(knowledge).filter_for("Person")`` gives a :class:`ClassFilter`: a
+Kalman filter (one mode) or an IMM (several modes) with its motion models,
+noise and initial state, as batched operations over many objects of the class.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from semwm.filters import batched
+from semwm.filters.motion import FloatArray, MotionOrder, process_noises, transition_matrices
+from semwm.knowledge.model import IMMFilterSpec, Knowledge, ResolvedClass
+
+
+@dataclass(frozen=True, eq=False)
+class ClassFilter:
+    """The filter of one class, batched over objects (see :mod:`semwm.filters.batched`).
+
+    Attributes
+    ----------
+    orders
+        The motion model of each mode; one mode for a Kalman filter.
+    spectral_densities
+        ``(M, d, d)``: each mode's system noise Q_c.
+    transition
+        ``(M, M)``: ``T[i, j] = P(mode j at k | mode i at k-1)``.
+    initial_mode_probabilities
+        ``(M,)``.
+    initial_covariance
+        ``(n, n)``: covariance of a new object's state.
+    """
+
+    class_name: str
+    dim: int
+    orders: tuple[MotionOrder, ...]
+    spectral_densities: FloatArray
+    transition: FloatArray
+    initial_mode_probabilities: FloatArray
+    initial_covariance: FloatArray
+    stationary_velocity_variance: float = 0.0
+    with_velocity: bool = field(default=False)
+
+    @property
+    def modes(self) -> int:
+        return len(self.orders)
+
+    @property
+    def state_size(self) -> int:
+        return self.initial_covariance.shape[0]
+
+    def initial_states(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """New objects at measured positions ``z`` ``(K, d)`` with zero velocity (paper 002 III-A)."""
+        K = z.shape[0]
+        x = np.zeros((K, self.modes, self.state_size))
+        x[:, :, : self.dim] = z[:, None, :]
+        P = np.broadcast_to(self.initial_covariance, (K, self.modes, *self.initial_covariance.shape))
+        mu = np.broadcast_to(self.initial_mode_probabilities, (K, self.modes))
+        return x, P.copy(), mu.copy()
+
+    def models(self, dt: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """F and Q per object and mode for time steps ``dt``; each ``(N, M, n, n)``."""
+        Fs = [
+            transition_matrices(order, self.dim, dt, self.with_velocity) for order in self.orders
+        ]
+        Qs = [
+            process_noises(
+                order, self.dim, dt, Qc, self.with_velocity, self.stationary_velocity_variance
+            )
+            for order, Qc in zip(self.orders, self.spectral_densities, strict=True)
+        ]
+        return np.stack(Fs, axis=1), np.stack(Qs, axis=1)
+
+    def predict(
+        self, x: FloatArray, P: FloatArray, mu: FloatArray, dt: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Predict each object by its own ``dt`` (s). Objects with ``dt <= 0`` are left as
+        they are: no time passes, so no mode transition either."""
+        moving = dt > 0.0
+        if moving.all():
+            F, Q = self.models(dt)
+            return batched.predict(x, P, mu, F, Q, self.transition)
+        x, P, mu = x.copy(), P.copy(), mu.copy()
+        if moving.any():
+            F, Q = self.models(dt[moving])
+            x[moving], P[moving], mu[moving] = batched.predict(
+                x[moving], P[moving], mu[moving], F, Q, self.transition
+            )
+        return x, P, mu
+
+    def update(
+        self, x: FloatArray, P: FloatArray, mu: FloatArray, z: FloatArray, R: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Update with measured positions; see :func:`semwm.filters.batched.update`."""
+        return batched.update(x, P, mu, z, R)
+
+    def combine(self, x: FloatArray, P: FloatArray, mu: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Combined mean ``(N, n)`` and covariance ``(N, n, n)``."""
+        return batched.combine(x, P, mu)
+
+
+class FilterFactory:
+    """Builds and caches each class's :class:`ClassFilter` and measurement noise."""
+
+    def __init__(self, knowledge: Knowledge) -> None:
+        self.knowledge = knowledge
+        self._filters: dict[str, ClassFilter] = {}
+
+    @cached_property
+    def dim(self) -> int:
+        return self.knowledge.world.dimension
+
+    def filter_for(self, class_name: str) -> ClassFilter:
+        built = self._filters.get(class_name)
+        if built is None:
+            built = build_class_filter(self.knowledge.classes[class_name], self.dim)
+            self._filters[class_name] = built
+        return built
+
+    def measurement_noise(self, class_name: str, detector: str) -> FloatArray:
+        """R for a class seen by a detector: the detector's per-class noise if it sets one
+        (for the class or its nearest ancestor), else the class's own."""
+        spec = self.knowledge.detectors[detector]
+        resolved = self.knowledge.classes[class_name]
+        for name in (class_name, *resolved.ancestors):
+            if name in spec.measurement_noise:
+                return np.asarray(spec.measurement_noise[name], dtype=float)
+        return np.asarray(resolved.measurement_noise, dtype=float)
+
+
+def build_class_filter(resolved: ResolvedClass, dim: int) -> ClassFilter:
+    """Turn a resolved class into its filter (paper 002 IV-B)."""
+    spec = resolved.filter
+    if isinstance(spec, IMMFilterSpec):
+        orders = tuple(m.motion_model for m in spec.models)
+        densities = np.array([m.system_noise for m in spec.models], dtype=float)
+        transition = np.array(spec.transition_matrix, dtype=float)
+        modes = len(orders)
+        initial_mu = (
+            np.array(spec.initial_mode_probabilities, dtype=float)
+            if spec.initial_mode_probabilities is not None
+            else np.full(modes, 1.0 / modes)
+        )
+        with_velocity = True
+        stationary = spec.stationary_velocity_variance
+    else:
+        orders = (spec.model.motion_model,)
+        densities = np.array([spec.model.system_noise], dtype=float)
+        transition = np.ones((1, 1))
+        initial_mu = np.ones(1)
+        with_velocity = spec.model.motion_model == "first_order"
+        stationary = 0.0
+    n = 2 * dim if with_velocity else dim
+    P0 = np.zeros((n, n))
+    P0[:dim, :dim] = np.asarray(resolved.initial_covariance, dtype=float)
+    if with_velocity:
+        P0[dim:, dim:] = np.asarray(resolved.initial_velocity_covariance, dtype=float)
+    return ClassFilter(
+        class_name=resolved.name,
+        dim=dim,
+        orders=orders,
+        spectral_densities=densities,
+        transition=transition,
+        initial_mode_probabilities=initial_mu,
+        initial_covariance=P0,
+        stationary_velocity_variance=stationary,
+        with_velocity=with_velocity,
+    )

@@ -1,0 +1,82 @@
+"""Motion models: the transition matrix F(dt) and the process noise Q(dt).
+
+State layout: position first, then velocity, ``x = [p_1..p_d, v_1..v_d]``.
+
+* ``zeroth_order`` (constant position, a random walk of the position), state ``p``:
+
+  .. math:: F = I_d, \\qquad Q = \\Delta t\\, Q_c
+
+* ``first_order`` (constant velocity, white-noise acceleration), state ``[p, v]``:
+
+  .. math::
+     F = \\begin{bmatrix} I & \\Delta t I \\\\ 0 & I \\end{bmatrix}, \\qquad
+     Q = \\begin{bmatrix} \\tfrac{\\Delta t^3}{3} Q_c & \\tfrac{\\Delta t^2}{2} Q_c \\\\
+                          \\tfrac{\\Delta t^2}{2} Q_c & \\Delta t\\, Q_c \\end{bmatrix}
+
+* ``zeroth_order`` inside an IMM (state ``[p, v]``, paper 002 IV-B): the position
+  random-walks and the velocity is reset to zero with variance
+  ``stationary_velocity_variance``:
+
+  .. math::
+     F = \\begin{bmatrix} I & 0 \\\\ 0 & 0 \\end{bmatrix}, \\qquad
+     Q = \\begin{bmatrix} \\Delta t\\, Q_c & 0 \\\\ 0 & \\sigma_v^2 I \\end{bmatrix}
+
+``Q_c`` is the d x d spectral density from the knowledge's ``system_noise``.
+Every builder takes an array of time steps and returns one matrix per step, so
+that objects last updated at different times are predicted in one call.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+MotionOrder = Literal["zeroth_order", "first_order"]
+
+
+def state_size(order: MotionOrder, dim: int, with_velocity: bool) -> int:
+    """Length of the state vector: ``d`` for a lone zeroth-order filter, else ``2d``."""
+    return 2 * dim if (with_velocity or order == "first_order") else dim
+
+
+def transition_matrices(
+    order: MotionOrder, dim: int, dt: FloatArray, with_velocity: bool = False
+) -> FloatArray:
+    """F(dt) for each time step; shape ``(len(dt), n, n)``."""
+    dt = np.asarray(dt, dtype=float)
+    n = state_size(order, dim, with_velocity)
+    eye = np.eye(dim)
+    F = np.zeros((dt.shape[0], n, n))
+    F[:, :dim, :dim] = eye
+    if order == "first_order":
+        F[:, dim:, dim:] = eye
+        F[:, :dim, dim:] = dt[:, None, None] * eye
+    return F
+
+
+def process_noises(
+    order: MotionOrder,
+    dim: int,
+    dt: FloatArray,
+    spectral_density: FloatArray,
+    with_velocity: bool = False,
+    stationary_velocity_variance: float = 0.0,
+) -> FloatArray:
+    """Q(dt) for each time step; shape ``(len(dt), n, n)``."""
+    dt = np.asarray(dt, dtype=float)[:, None, None]
+    Qc = np.asarray(spectral_density, dtype=float)
+    n = state_size(order, dim, with_velocity)
+    Q = np.zeros((dt.shape[0], n, n))
+    if order == "first_order":
+        Q[:, :dim, :dim] = dt**3 / 3.0 * Qc
+        Q[:, :dim, dim:] = dt**2 / 2.0 * Qc
+        Q[:, dim:, :dim] = dt**2 / 2.0 * Qc
+        Q[:, dim:, dim:] = dt * Qc
+    else:
+        Q[:, :dim, :dim] = dt * Qc
+        if n > dim:
+            Q[:, dim:, dim:] = stationary_velocity_variance * np.eye(dim)
+    return Q
