@@ -1,0 +1,82 @@
+"""Detections: what robots and sensors report."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class Detection(BaseModel):
+    """One object detection.
+
+    Attributes
+    ----------
+    time
+        When the object was seen (s).
+    cls
+        The detected class label (``class`` in JSON), e.g. ``"Cup"``.
+    position
+        Measured position (m), with as many entries as the knowledge's dimension.
+    covariance
+        Measurement noise of this detection (m^2, d x d); else the detector's noise
+        for the class, else the class's.
+    source
+        Robot or sensor id. Detections with the same source and time form one scan.
+    detector
+        The detector (knowledge ``detectors``) that produced it; defaults to the
+        knowledge's default detector.
+    label
+        An identity, e.g. a robot reporting its own position carries its id
+        (paper 000 III-B labeling rules).
+    sensor_position
+        Where the sensor was (m); with a detector ``range`` it enables paper 000's C2.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
+
+    time: Finite
+    cls: str = Field(alias="class", min_length=1)
+    position: tuple[Finite, ...]
+    covariance: tuple[tuple[Finite, ...], ...] | None = None
+    source: str | None = None
+    detector: str | None = None
+    label: str | None = None
+    sensor_position: tuple[Finite, ...] | None = None
+
+    def to_dict(self) -> dict[str, object]:
+        return self.model_dump(by_alias=True, exclude_none=True)
+
+
+class DetectionProblem(BaseModel):
+    """One reason a detection was refused: the field path and a message."""
+
+    model_config = ConfigDict(frozen=True)
+
+    path: tuple[str | int, ...]
+    message: str
+
+
+class DetectionError(ValueError):
+    """Detections refused as a whole; nothing of the batch was applied."""
+
+    def __init__(self, problems: list[DetectionProblem]) -> None:
+        self.problems = tuple(problems)
+        super().__init__(
+            "; ".join(f"{'.'.join(map(str, p.path)) or '<batch>'}: {p.message}" for p in problems)
+        )
+
+
+class OutOfOrderError(ValueError):
+    """A detection older than the reorder window allows; nothing of the batch was applied."""
+
+    def __init__(self, time: float, latest: float, window: float) -> None:
+        self.time = time
+        self.latest = latest
+        self.window = window
+        super().__init__(
+            f"detection at time {time:g} s is older than the latest processed time {latest:g} s "
+            f"minus the reorder window {window:g} s"
+        )
