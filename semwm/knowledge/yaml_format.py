@@ -1,0 +1,136 @@
+"""The YAML form of knowledge files: the model's field names, one to one.
+
+Reading composes PyYAML's node tree (which keeps every node's position) and
+builds the plain data from it, so that every key and list item gets its line in
+the *line map* (field path -> 1-based line). A mapping entry is located at its
+key, a list item where it starts. Validation is the loader's job
+(:mod:`semwm.knowledge.loader`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import yaml
+
+from semwm.knowledge.model import KnowledgeDocument
+from semwm.knowledge.problems import Path, Problem
+
+LineMap = dict[Path, int]
+ReadResult = tuple[dict[str, Any] | None, LineMap, list[Problem]]
+"""Data for :class:`KnowledgeDocument` (``None`` when unreadable), line map, problems."""
+
+
+def _line(node: yaml.Node) -> int:
+    return int(node.start_mark.line) + 1
+
+
+class _Builder:
+    """Python values from composed nodes, recording where each path was written."""
+
+    def __init__(self, loader: yaml.SafeLoader) -> None:
+        self.loader = loader
+        self.lines: LineMap = {}
+        self.problems: list[Problem] = []
+
+    def build(self, node: yaml.Node, path: Path) -> Any:
+        if isinstance(node, yaml.MappingNode):
+            self.loader.flatten_mapping(node)  # resolves "<<" merge keys
+            result: dict[Any, Any] = {}
+            for key_node, value_node in node.value:
+                key = self.loader.construct_object(key_node, deep=True)
+                where = (*path, key if isinstance(key, str | int) else str(key))
+                if key in result:
+                    self.problems.append(
+                        Problem(
+                            f"key {key!r} given twice (first at line {self.lines[where]})",
+                            where,
+                            line=_line(key_node),
+                        )
+                    )
+                    continue
+                self.lines[where] = _line(key_node)
+                result[key] = self.build(value_node, where)
+            return result
+        if isinstance(node, yaml.SequenceNode):
+            items = []
+            for index, item in enumerate(node.value):
+                self.lines[(*path, index)] = _line(item)
+                items.append(self.build(item, (*path, index)))
+            return items
+        return self.loader.construct_object(node, deep=True)
+
+
+def read_yaml(content: str | bytes) -> ReadResult:
+    """Read the YAML form.
+
+    Returns
+    -------
+    data, lines, problems
+        ``data`` is ``None`` when the text is not well-formed YAML or not a mapping
+        at the top (then ``problems`` says so, at its line).
+    """
+    loader = yaml.SafeLoader(content)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None, {}, [Problem("empty YAML document; expected a mapping", (), line=1)]
+        builder = _Builder(loader)
+        data = builder.build(node, ())
+    except yaml.MarkedYAMLError as error:
+        mark = error.problem_mark or error.context_mark
+        line = int(mark.line) + 1 if mark is not None else None
+        parts = [part for part in (error.context, error.problem) if part]
+        return None, {}, [Problem("malformed YAML: " + ", ".join(parts), (), line=line)]
+    except yaml.YAMLError as error:
+        return None, {}, [Problem(f"malformed YAML: {error}", ())]
+    finally:
+        loader.dispose()
+    builder.lines[()] = _line(node)
+    if not isinstance(data, dict):
+        found = type(data).__name__
+        return (
+            None,
+            {},
+            [Problem(f"expected a mapping at the top; found a {found}", (), line=_line(node))],
+        )
+    return data, builder.lines, builder.problems
+
+
+def _plain(value: Any) -> Any:
+    """Tuples and mappings as lists and dicts, which ``yaml.safe_dump`` represents."""
+    if isinstance(value, Mapping):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, tuple | list):
+        return [_plain(item) for item in value]
+    return value
+
+
+def document_to_data(document: KnowledgeDocument) -> dict[str, Any]:
+    """``document`` as plain data, leaving out what is empty or unset in the world settings."""
+    data: dict[str, Any] = _plain(document.model_dump(by_alias=True, exclude_none=True))
+    world = document.world
+    data["world"] = {
+        name: value
+        for name, value in data["world"].items()
+        if name in world.model_fields_set or value != type(world).model_fields[name].default
+    }
+    if not data["world"]:
+        del data["world"]
+    for spec in data["classes"]:
+        if not spec["is_a"]:
+            del spec["is_a"]
+    for detector in data["detectors"]:
+        if not detector["measurement_noise"]:
+            del detector["measurement_noise"]
+    if not data["known_objects"]:
+        del data["known_objects"]
+    return data
+
+
+def document_to_yaml(document: KnowledgeDocument) -> str:
+    """The YAML form of ``document``; :func:`read_yaml` reads it back to an equal document."""
+    return yaml.safe_dump(
+        document_to_data(document), sort_keys=False, default_flow_style=None, allow_unicode=True
+    )
