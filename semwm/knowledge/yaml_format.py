@@ -129,8 +129,24 @@ def document_to_data(document: KnowledgeDocument) -> dict[str, Any]:
     return data
 
 
+class _Dumper(yaml.SafeDumper):
+    """Block style, except that a list of plain values (a matrix row) goes on one line."""
+
+
+def _represent_list(dumper: yaml.SafeDumper, items: list[Any]) -> yaml.Node:
+    flat = all(not isinstance(item, list | dict) for item in items)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", items, flow_style=flat)
+
+
+_Dumper.add_representer(list, _represent_list)
+
+
 def document_to_yaml(document: KnowledgeDocument) -> str:
     """The YAML form of ``document``; :func:`read_yaml` reads it back to an equal document."""
-    return yaml.safe_dump(
-        document_to_data(document), sort_keys=False, default_flow_style=None, allow_unicode=True
+    return yaml.dump(
+        document_to_data(document),
+        Dumper=_Dumper,
+        sort_keys=False,
+        default_flow_style=False,
+        allow_unicode=True,
     )
