@@ -1,5 +1,6 @@
 """Class knowledge: the model, its resolution, the taxonomy and the file loaders."""
 
+from semwm.knowledge.loader import load_document, load_knowledge
 from semwm.knowledge.model import (
     AppearanceRelation,
     ClassSpec,
@@ -32,5 +33,7 @@ __all__ = [
     "ResolvedClass",
     "Taxonomy",
     "WorldSettings",
+    "load_document",
+    "load_knowledge",
     "resolve",
 ]
