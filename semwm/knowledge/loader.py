@@ -257,7 +257,8 @@ def analyse_text(content: str | bytes, fmt: Format, source: str | None = None) -
     return Analysis(tuple(located), document, knowledge if not located else None)
 
 
-def _analyse_file(path: str | FilePath) -> Analysis:
+def analyse_file(path: str | FilePath) -> Analysis:
+    """Read, validate and resolve a knowledge file (see :func:`analyse_text`)."""
     fmt = format_of(path)
     content = FilePath(path).read_bytes()
     return analyse_text(content if fmt == "xml" else content.decode("utf-8"), fmt, str(path))
@@ -269,7 +270,7 @@ def check_file(path: str | FilePath) -> list[Problem]:
     Raises only when the file cannot be read (``OSError``) or its extension names no
     format (:class:`UnknownFormatError`), never for its content.
     """
-    return list(_analyse_file(path).problems)
+    return list(analyse_file(path).problems)
 
 
 def load_document(path: str | FilePath) -> KnowledgeDocument:
@@ -280,7 +281,7 @@ def load_document(path: str | FilePath) -> KnowledgeDocument:
     KnowledgeError
         When the file is malformed or does not fit the model (each problem located).
     """
-    analysis = _analyse_file(path)
+    analysis = analyse_file(path)
     if analysis.document is None:
         raise KnowledgeError(analysis.problems)
     return analysis.document
@@ -296,7 +297,7 @@ def load_knowledge(path: str | FilePath) -> Knowledge:
     UnknownFormatError
         When the extension names no format.
     """
-    analysis = _analyse_file(path)
+    analysis = analyse_file(path)
     if analysis.knowledge is None:
         raise KnowledgeError(analysis.problems)
     return analysis.knowledge
