@@ -1,0 +1,85 @@
+"""The FastAPI application: ``create_app(settings)``.
+
+Nothing heavy happens at import or in :func:`create_app`: the knowledge file is
+read and the world model built in the lifespan, when the server starts.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import FastAPI
+from fastapi.openapi.utils import get_openapi
+from pydantic import BaseModel
+
+from api.errors import install_error_handlers
+from api.routes import detections, knowledge, system, world
+from api.schemas import DetectionBatch, DetectionIn
+from api.service import WorldService
+from api.settings import Settings
+
+logger = logging.getLogger("api")
+
+DESCRIPTION = """\
+A semantic world model for robots: post detections, ask for the objects.
+
+Times are in seconds, positions in metres, covariances in square metres. A batch of
+detections is applied whole or not at all; refusals are 4xx with the field path of
+every problem, and leave the world as it was.
+"""
+
+
+def create_app(settings: Settings) -> FastAPI:
+    """Build the application.
+
+    The world model is built from ``settings.knowledge`` when the app starts
+    (lifespan). Tests may instead override :func:`api.deps.get_world`.
+    """
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        if not hasattr(app.state, "world"):
+            if settings.knowledge is None:
+                raise RuntimeError(
+                    "no knowledge file: pass --knowledge FILE or set SEMWM_KNOWLEDGE"
+                )
+            app.state.world = WorldService.from_file(
+                settings.knowledge,
+                reorder_window=settings.reorder_window,
+                write_back=settings.write_back,
+            )
+            logger.info("world model built from %s", settings.knowledge)
+        yield
+
+    app = FastAPI(title="semwm", version="0.1.0", description=DESCRIPTION, lifespan=lifespan)
+    app.state.settings = settings
+    install_error_handlers(app)
+    for module in (detections, world, knowledge, system):
+        app.include_router(module.router)
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = get_openapi(
+                title=app.title,
+                version=app.version,
+                description=app.description,
+                routes=app.routes,
+            )
+            _add_schemas(schema, (DetectionIn, DetectionBatch))
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
+    return app
+
+
+def _add_schemas(schema: dict[str, Any], models: tuple[type[BaseModel], ...]) -> None:
+    """Add models a route validates by hand (``POST /detections``) to the components."""
+    components = schema.setdefault("components", {}).setdefault("schemas", {})
+    for model in models:
+        json_schema = model.model_json_schema(ref_template="#/components/schemas/{model}")
+        components.update(json_schema.pop("$defs", {}))
+        components[model.__name__] = json_schema

@@ -1,0 +1,79 @@
+"""``semwm serve``: run the HTTP service with uvicorn."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+
+def add_serve_command(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``serve`` to the ``semwm`` command's sub-commands."""
+    parser: argparse.ArgumentParser = subparsers.add_parser(
+        "serve",
+        help="run the HTTP service",
+        description="Run the semwm HTTP service. Every option can also be set from the "
+        "environment: SEMWM_KNOWLEDGE, SEMWM_HOST, SEMWM_PORT, SEMWM_REORDER_WINDOW, "
+        "SEMWM_MAX_BATCH, SEMWM_WRITE_BACK.",
+    )
+    parser.add_argument("--knowledge", type=Path, help="knowledge file (YAML or XML)")
+    parser.add_argument("--host", help="address to bind (default 127.0.0.1)")
+    parser.add_argument("--port", type=int, help="port (default 8000; 0 picks a free one)")
+    parser.add_argument("--reorder-window", type=float, help="seconds (default 0.5)")
+    parser.add_argument("--max-batch", type=int, help="largest batch (default 10000)")
+    parser.add_argument(
+        "--write-back",
+        action="store_true",
+        default=None,
+        help="write accepted class edits back to the knowledge file",
+    )
+    parser.add_argument("--log-level", default="info", help="uvicorn log level")
+    parser.set_defaults(func=run_serve)
+    return parser
+
+
+def run_serve(args: argparse.Namespace) -> int:
+    """Start uvicorn with the settings from ``args`` over the environment."""
+    import uvicorn
+
+    from api.app import create_app
+    from api.settings import Settings
+
+    given = {
+        key: getattr(args, key)
+        for key in ("knowledge", "host", "port", "reorder_window", "max_batch", "write_back")
+        if getattr(args, key, None) is not None
+    }
+    try:
+        settings = Settings(**given)
+    except ValidationError as error:
+        for problem in error.errors():
+            field = ".".join(map(str, problem["loc"]))
+            print(f"semwm serve: {field}: {problem['msg']}")
+        return 2
+    if settings.knowledge is None:
+        print("semwm serve: no knowledge file: pass --knowledge FILE or set SEMWM_KNOWLEDGE")
+        return 2
+    if not settings.knowledge.is_file():
+        print(f"semwm serve: {settings.knowledge}: no such file")
+        return 2
+    uvicorn.run(
+        create_app(settings), host=settings.host, port=settings.port, log_level=args.log_level
+    )
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m api.cli serve ...``: the command without the rest of ``semwm``."""
+    parser = argparse.ArgumentParser(prog="semwm")
+    commands = parser.add_subparsers(dest="command", required=True)
+    add_serve_command(commands)
+    args = parser.parse_args(argv)
+    result: int = args.func(args)
+    return result
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,25 @@
+"""Typed dependencies of the routes."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import Depends, Request
+
+from api.service import WorldService
+from api.settings import Settings
+
+
+def get_world(request: Request) -> WorldService:
+    """The process's world service, built by the app's lifespan (tests override this)."""
+    service: WorldService = request.app.state.world
+    return service
+
+
+def get_settings(request: Request) -> Settings:
+    settings: Settings = request.app.state.settings
+    return settings
+
+
+WorldDep = Annotated[WorldService, Depends(get_world)]
+SettingsDep = Annotated[Settings, Depends(get_settings)]

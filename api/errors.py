@@ -1,0 +1,134 @@
+"""Errors the service raises and how each becomes an HTTP response.
+
+Every refusal is a 4xx whose body says what was wrong and where; the state of
+the world is unchanged when one is raised. Only a bug gives a 500.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+
+Loc = tuple[str | int, ...]
+
+logger = logging.getLogger("api")
+
+
+class ApiError(Exception):
+    """A request refused with ``status`` and a message."""
+
+    status = 400
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.message = message
+
+    def body(self) -> dict[str, Any]:
+        return {"detail": self.message}
+
+
+class NotFoundError(ApiError):
+    """404: the thing named in the path does not exist."""
+
+    status = 404
+
+
+class ConflictError(ApiError):
+    """409: the request is well formed but conflicts with the state (e.g. too old)."""
+
+    status = 409
+
+
+class InvalidError(ApiError):
+    """422 with one ``{"loc", "msg", "type"}`` item per problem, like FastAPI's own."""
+
+    status = 422
+
+    def __init__(self, errors: Sequence[dict[str, Any]]) -> None:
+        self.errors = list(errors)
+        super().__init__("; ".join(f"{_dotted(e['loc'])}: {e['msg']}" for e in self.errors))
+
+    @classmethod
+    def one(cls, loc: Loc, msg: str, type_: str = "value_error") -> InvalidError:
+        return cls([{"loc": list(loc), "msg": msg, "type": type_}])
+
+    def body(self) -> dict[str, Any]:
+        return {"detail": self.errors}
+
+
+class KnowledgeFileError(ApiError):
+    """422 of a knowledge file that cannot be used: one ``FILE:LINE: message`` per problem."""
+
+    status = 422
+
+    def __init__(self, message: str, problems: Sequence[str]) -> None:
+        super().__init__(message)
+        self.problems = list(problems)
+
+    def body(self) -> dict[str, Any]:
+        return {"detail": self.message, "problems": self.problems}
+
+
+def _dotted(loc: Sequence[object]) -> str:
+    return ".".join(str(part) for part in loc)
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with anything JSON cannot hold (NaN, infinities, objects) made a string.
+
+    Error bodies echo the input; an input ``NaN`` (which Python's JSON parser
+    accepts) must not turn a 422 into a 500 when the response is rendered.
+    """
+    if isinstance(value, float):
+        return value if math.isfinite(value) else str(value)
+    if value is None or isinstance(value, str | int | bool):
+        return value
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    return str(value)
+
+
+def validation_items(errors: Sequence[Any], prefix: Loc = ()) -> list[dict[str, Any]]:
+    """Pydantic/FastAPI error dicts as JSON-safe ``{"loc", "msg", "type", "input"}`` items."""
+    items = []
+    for error in errors:
+        item: dict[str, Any] = {
+            "loc": [*prefix, *error.get("loc", ())],
+            "msg": str(error.get("msg", "")),
+            "type": str(error.get("type", "value_error")),
+        }
+        if "input" in error:
+            item["input"] = json_safe(error["input"])
+        items.append(item)
+    return items
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    """Map :class:`ApiError`, request validation errors and bugs to responses."""
+
+    async def on_api_error(request: Request, exc: Exception) -> JSONResponse:
+        assert isinstance(exc, ApiError)
+        return JSONResponse(status_code=exc.status, content=exc.body())
+
+    async def on_validation_error(request: Request, exc: Exception) -> JSONResponse:
+        assert isinstance(exc, RequestValidationError)
+        return JSONResponse(status_code=422, content={"detail": validation_items(exc.errors())})
+
+    async def on_bug(request: Request, exc: Exception) -> JSONResponse:
+        logger.exception("unhandled error in %s %s", request.method, request.url.path)
+        return JSONResponse(
+            status_code=500,
+            content={"detail": f"internal error ({type(exc).__name__}); see the server log"},
+        )
+
+    app.add_exception_handler(ApiError, on_api_error)
+    app.add_exception_handler(RequestValidationError, on_validation_error)
+    app.add_exception_handler(Exception, on_bug)

@@ -1,0 +1,107 @@
+"""``GET /world``, ``GET /world/objects/{id}``, ``GET /hypotheses``: what the filter believes."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Path, Query
+
+from api.deps import WorldDep
+from api.errors import InvalidError
+from api.schemas import (
+    HypothesesOut,
+    HypothesisOut,
+    MessageOut,
+    ValidationErrorOut,
+    WorldObjectOut,
+    WorldOut,
+)
+
+router = APIRouter(tags=["world"])
+
+TimeQuery = Annotated[
+    float | None,
+    Query(
+        allow_inf_nan=False,
+        description="Predict the objects to this time (s); default: the latest detection's.",
+    ),
+]
+_INVALID: dict[int | str, dict[str, Any]] = {
+    422: {"model": ValidationErrorOut, "description": "Invalid query"}
+}
+
+
+def parse_near(near: str) -> tuple[float, ...]:
+    """``"x,y,r"`` or ``"x,y,z,r"`` as numbers (422 on anything else)."""
+    parts = [p.strip() for p in near.split(",")]
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise InvalidError.one(
+            ("query", "near"),
+            f"near must be comma-separated numbers x,y,r or x,y,z,r; got {near!r}",
+        ) from None
+    if len(values) not in (3, 4):
+        raise InvalidError.one(
+            ("query", "near"), f"near must be x,y,r or x,y,z,r; got {len(values)} numbers"
+        )
+    if not all(math.isfinite(v) for v in values):
+        raise InvalidError.one(("query", "near"), f"near must hold finite numbers; got {near!r}")
+    if values[-1] < 0:
+        raise InvalidError.one(("query", "near"), f"the radius must be >= 0; got {values[-1]:g}")
+    return values
+
+
+@router.get(
+    "/world", response_model=WorldOut, summary="The objects of the world", responses=_INVALID
+)
+def get_world(
+    world: WorldDep,
+    time: TimeQuery = None,
+    cls: Annotated[
+        str | None,
+        Query(
+            alias="class",
+            description="Only objects of this class or its subclasses ('Can' includes 'CokeCan').",
+        ),
+    ] = None,
+    near: Annotated[
+        str | None,
+        Query(description="Only objects within r metres of a point: 'x,y,r' or 'x,y,z,r'."),
+    ] = None,
+    label: Annotated[str | None, Query(description="Only objects with this label.")] = None,
+) -> WorldOut:
+    """The objects of the most probable hypothesis, predicted to ``time``."""
+    centre = parse_near(near) if near is not None else None
+    state = world.world(time=time, cls=cls, near=centre, label=label)
+    return WorldOut.model_validate(state.to_dict())
+
+
+@router.get(
+    "/world/objects/{object_id}",
+    response_model=WorldObjectOut,
+    summary="One object of the world",
+    responses={404: {"model": MessageOut, "description": "No such object"}, **_INVALID},
+)
+def get_object(
+    world: WorldDep,
+    object_id: Annotated[int, Path(description="The object's id as in GET /world.")],
+    time: TimeQuery = None,
+) -> WorldObjectOut:
+    """One object, predicted to ``time``; 404 naming the id when it is not in the world."""
+    return WorldObjectOut.model_validate(world.object(object_id, time=time).to_dict())
+
+
+@router.get(
+    "/hypotheses", response_model=HypothesesOut, summary="The best hypotheses", responses=_INVALID
+)
+def get_hypotheses(
+    world: WorldDep,
+    limit: Annotated[int, Query(ge=1, le=1000, description="How many, best first.")] = 10,
+) -> HypothesesOut:
+    """The ``limit`` most probable hypotheses with their probabilities and objects."""
+    total, summaries = world.hypotheses(limit)
+    return HypothesesOut(
+        total=total, hypotheses=[HypothesisOut.model_validate(h.to_dict()) for h in summaries]
+    )

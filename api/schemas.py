@@ -1,0 +1,232 @@
+"""Request and response bodies of the HTTP API.
+
+These are the wire format, kept apart from the domain values of :mod:`semwm`
+(:class:`semwm.detection.Detection`, :class:`semwm.world_types.WorldObject`, ...):
+routes translate between the two. Times are in seconds, positions in metres,
+covariances in square metres.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from semwm.knowledge import ClassSpec, ResolvedClass
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Vector = Annotated[list[Finite], Field(min_length=2, max_length=3)]
+
+
+class Body(BaseModel):
+    """Base of request bodies: unknown keys are refused, not silently dropped."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
+
+
+DETECTION_EXAMPLE: dict[str, Any] = {
+    "time": 12.3,
+    "class": "Cup",
+    "position": [1.0, 2.0],
+    "covariance": [[0.01, 0.0], [0.0, 0.01]],
+    "source": "robot1",
+}
+
+
+class DetectionIn(Body):
+    """One detection, as a robot reports it."""
+
+    model_config = ConfigDict(json_schema_extra={"examples": [DETECTION_EXAMPLE]})
+
+    time: Finite = Field(description="When the object was seen (s).")
+    cls: str = Field(alias="class", min_length=1, description="The detected class, e.g. 'Cup'.")
+    position: Vector = Field(description="Measured position (m): [x, y] or [x, y, z].")
+    covariance: list[list[Finite]] | None = Field(
+        default=None,
+        description="Measurement noise (m^2, d x d, symmetric positive definite); "
+        "defaults to the detector's or the class's.",
+    )
+    source: str | None = Field(default=None, description="Robot or sensor id.")
+    detector: str | None = Field(default=None, description="Detector name from the knowledge.")
+    label: str | None = Field(default=None, description="An identity, e.g. a robot's own id.")
+    sensor_position: Vector | None = Field(
+        default=None, description="Where the sensor was (m), for detector ranges."
+    )
+
+    def to_domain(self) -> dict[str, Any]:
+        """The detection as :meth:`semwm.WorldModel.ingest` takes it."""
+        return self.model_dump(by_alias=True, exclude_none=True)
+
+
+class DetectionBatch(Body):
+    """Several detections, applied together or not at all."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "detections": [
+                        DETECTION_EXAMPLE,
+                        {"time": 12.3, "class": "CokeCan", "position": [0.5, 1.5]},
+                    ]
+                }
+            ]
+        }
+    )
+
+    detections: list[DetectionIn] = Field(min_length=1)
+
+
+class IngestOut(BaseModel):
+    """What ``POST /detections`` acknowledges."""
+
+    model_config = ConfigDict(json_schema_extra={"examples": [{"applied": 2, "time": 12.3}]})
+
+    applied: int = Field(description="How many detections were accepted.")
+    time: float | None = Field(description="The world time after them (s).")
+
+
+class WorldObjectOut(BaseModel):
+    """An object of the most probable hypothesis, predicted to the query time."""
+
+    model_config = ConfigDict(populate_by_name=True)
+
+    id: int
+    cls: str = Field(alias="class")
+    label: str | None
+    position: list[float] = Field(description="m")
+    velocity: list[float] | None = Field(description="m/s; null for classes without velocity")
+    covariance: list[list[float]] = Field(description="position covariance (m^2)")
+    existence: float = Field(description="probability that the object exists")
+    last_seen: float = Field(description="time of its last detection (s)")
+    created: float | None = Field(default=None, description="time of its first detection (s)")
+    mode_probabilities: dict[str, float] | None = Field(
+        default=None, description="IMM motion model -> probability"
+    )
+
+
+WORLD_OBJECT_EXAMPLE: dict[str, Any] = {
+    "id": 1,
+    "class": "Cup",
+    "label": None,
+    "position": [1.0, 2.0],
+    "velocity": None,
+    "covariance": [[0.01, 0.0], [0.0, 0.01]],
+    "existence": 0.97,
+    "last_seen": 12.3,
+    "created": 10.0,
+    "mode_probabilities": None,
+}
+
+
+class WorldOut(BaseModel):
+    """The world at ``time``."""
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{"time": 12.3, "objects": [WORLD_OBJECT_EXAMPLE]}]}
+    )
+
+    time: float | None = Field(description="The time the objects are predicted to (s).")
+    objects: list[WorldObjectOut]
+
+
+class HypothesisObjectOut(BaseModel):
+    """An object of a hypothesis."""
+
+    model_config = ConfigDict(populate_by_name=True)
+
+    id: int | None = Field(description="public id, if the object was ever published")
+    track: int
+    cls: str = Field(alias="class")
+    label: str | None
+    position: list[float]
+
+
+class HypothesisOut(BaseModel):
+    """One hypothesis: its probability and its objects."""
+
+    probability: float
+    objects: list[HypothesisObjectOut]
+
+
+class HypothesesOut(BaseModel):
+    """The most probable hypotheses, best first."""
+
+    total: int = Field(description="How many hypotheses the filter holds.")
+    hypotheses: list[HypothesisOut]
+
+
+class ClassOut(BaseModel):
+    """A class: as resolved (inheritance applied) and as written."""
+
+    name: str
+    resolved: ResolvedClass
+    spec: ClassSpec
+    written: bool = Field(
+        default=False, description="PUT only: whether the edit was written to the knowledge file."
+    )
+
+
+class ReloadOut(BaseModel):
+    """The knowledge reloaded from its file."""
+
+    knowledge: str
+    classes: list[str]
+
+
+class ResetOut(BaseModel):
+    """The world after a reset."""
+
+    status: str = "reset"
+    time: float | None
+
+
+class HealthOut(BaseModel):
+    """Liveness and a one-line summary of the world."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "status": "ok",
+                    "knowledge": "knowledge/sim1.yaml",
+                    "time": 12.3,
+                    "hypotheses": 4,
+                    "objects": 7,
+                }
+            ]
+        }
+    )
+
+    status: str = "ok"
+    knowledge: str | None
+    time: float | None
+    hypotheses: int
+    objects: int
+
+
+class ErrorItem(BaseModel):
+    """One problem with a request: where (``loc``) and what (``msg``)."""
+
+    loc: list[str | int]
+    msg: str
+    type: str
+
+
+class ValidationErrorOut(BaseModel):
+    """422: every problem found; nothing was changed."""
+
+    detail: list[ErrorItem]
+
+
+class MessageOut(BaseModel):
+    """An error with a message (404, 409)."""
+
+    detail: str
+
+
+class KnowledgeFileErrorOut(BaseModel):
+    """422 of ``POST /knowledge/reload``: the problems of the file, ``FILE:LINE: message``."""
+
+    detail: str
+    problems: list[str]

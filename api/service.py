@@ -1,0 +1,266 @@
+"""The world model behind one lock: what the routes talk to.
+
+:class:`WorldService` owns the :class:`semwm.WorldModel` of the process. Every
+call that reads or changes it takes the same lock, so concurrent requests are
+applied one after the other and a read sees a consistent snapshot (every
+detection acknowledged before it, none half-applied). Domain errors become
+:mod:`api.errors` values with HTTP field paths; the routes only translate.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from api.errors import ConflictError, InvalidError, KnowledgeFileError, Loc, NotFoundError
+from semwm.detection import DetectionError, DetectionProblem, OutOfOrderError
+from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
+from semwm.knowledge.loader import load_knowledge
+from semwm.world import WorldModel
+from semwm.world_types import HypothesisSummary, WorldObject, WorldState
+
+
+def known_list(names: Sequence[str]) -> str:
+    return ", ".join(sorted(names)) or "none"
+
+
+def detection_loc(path: Sequence[str | int], batch: bool) -> Loc:
+    """The HTTP field path of a :class:`DetectionProblem` path (relative to the batch)."""
+    if batch:
+        return ("body", "detections", *path)
+    rest = tuple(path[1:]) if path and path[0] == 0 else tuple(path)
+    return ("body", *rest)
+
+
+def problems_to_items(
+    problems: Sequence[DetectionProblem], batch: bool, index: Sequence[int] | None = None
+) -> list[dict[str, Any]]:
+    """Detection problems as 422 items; ``index`` maps positions of a sub-batch back."""
+    items = []
+    for problem in problems:
+        path = list(problem.path)
+        if index is not None and path and isinstance(path[0], int) and path[0] < len(index):
+            path[0] = index[path[0]]
+        items.append(
+            {"loc": list(detection_loc(path, batch)), "msg": problem.message, "type": "detection"}
+        )
+    return items
+
+
+class WorldService:
+    """A :class:`WorldModel` shared by every request, with its knowledge file.
+
+    Parameters
+    ----------
+    model
+        The world model (built by the app's lifespan, or by a test).
+    knowledge_path
+        The file the knowledge came from: what ``POST /knowledge/reload`` re-reads
+        and write-back writes. ``None`` when the knowledge was built in code.
+    write_back
+        Write accepted class edits to ``knowledge_path``.
+    """
+
+    def __init__(
+        self, model: WorldModel, knowledge_path: Path | None = None, write_back: bool = False
+    ) -> None:
+        self._model = model
+        self._lock = threading.Lock()
+        self.knowledge_path = knowledge_path
+        self.write_back = write_back
+
+    @classmethod
+    def from_file(
+        cls, path: Path, reorder_window: float = 0.5, write_back: bool = False
+    ) -> WorldService:
+        """Load ``path`` and build the world model (raises :class:`KnowledgeError`)."""
+        return cls(
+            WorldModel(load_knowledge(path), reorder_window=reorder_window), path, write_back
+        )
+
+    # -- detections ---------------------------------------------------------------------------
+
+    def ingest(self, detections: Sequence[dict[str, Any]], batch: bool) -> tuple[int, float | None]:
+        """Apply ``detections`` whole, or raise :class:`InvalidError`/:class:`ConflictError`."""
+        with self._lock:
+            try:
+                result = self._model.ingest(list(detections))
+            except DetectionError as error:
+                raise InvalidError(problems_to_items(error.problems, batch)) from error
+            except OutOfOrderError as error:
+                raise ConflictError(f"{error}; nothing was applied") from error
+            return result.applied, result.time
+
+    def domain_problems(
+        self, detections: Sequence[dict[str, Any]], index: Sequence[int], batch: bool
+    ) -> list[dict[str, Any]]:
+        """The domain problems of detections that passed the schema (nothing is applied)."""
+        if not detections:
+            return []
+        with self._lock:
+            try:
+                self._model.validate(list(detections))
+            except DetectionError as error:
+                return problems_to_items(error.problems, batch, index)
+            except ValueError:
+                return []
+        return []
+
+    # -- queries ------------------------------------------------------------------------------
+
+    def _check_class(self, cls: str | None) -> None:
+        if cls is not None and cls not in self._model.knowledge.classes:
+            known = known_list(list(self._model.knowledge.classes))
+            raise InvalidError.one(
+                ("query", "class"), f"unknown class {cls!r}; known classes: {known}"
+            )
+
+    def world(
+        self,
+        time: float | None = None,
+        cls: str | None = None,
+        near: tuple[float, ...] | None = None,
+        label: str | None = None,
+    ) -> WorldState:
+        with self._lock:
+            self._check_class(cls)
+            if near is not None and len(near) - 1 != self._model.knowledge.dimension:
+                dim = self._model.knowledge.dimension
+                raise InvalidError.one(
+                    ("query", "near"),
+                    f"near must be {dim + 1} numbers (a {dim}-d centre and a radius); "
+                    f"found {len(near)}",
+                )
+            try:
+                return self._model.world(time=time, cls=cls, near=near, label=label)
+            except ValueError as error:
+                raise InvalidError.one(("query",), str(error)) from error
+
+    def object(self, object_id: int, time: float | None = None) -> WorldObject:
+        with self._lock:
+            try:
+                found = self._model.object(object_id, time=time)
+            except ValueError as error:
+                raise InvalidError.one(("query", "time"), str(error)) from error
+        if found is None:
+            raise NotFoundError(f"no object with id {object_id} in the world")
+        return found
+
+    def hypotheses(self, limit: int) -> tuple[int, list[HypothesisSummary]]:
+        with self._lock:
+            return self._model.hypothesis_count, list(self._model.hypotheses(limit))
+
+    def health(self) -> dict[str, Any]:
+        with self._lock:
+            return {
+                "status": "ok",
+                "knowledge": str(self.knowledge_path) if self.knowledge_path else None,
+                "time": self._model.latest_time,
+                "hypotheses": self._model.hypothesis_count,
+                "objects": self._model.object_count,
+            }
+
+    def reset(self) -> float | None:
+        with self._lock:
+            self._model.reset()
+            return self._model.latest_time
+
+    # -- knowledge ----------------------------------------------------------------------------
+
+    @property
+    def knowledge(self) -> Knowledge:
+        with self._lock:
+            return self._model.knowledge
+
+    def class_view(self, name: str) -> tuple[Knowledge, ClassSpec]:
+        """The knowledge and the spec of class ``name`` (404 listing the known ones)."""
+        knowledge = self.knowledge
+        for spec in knowledge.document.classes:
+            if spec.name == name and name in knowledge.classes:
+                return knowledge, spec
+        raise NotFoundError(
+            f"unknown class {name!r}; known classes: {known_list(list(knowledge.classes))}"
+        )
+
+    def put_class(self, name: str, spec: ClassSpec) -> tuple[Knowledge, bool]:
+        """Replace or add class ``name``; applied from the next detection.
+
+        The new document is resolved like a file; problems become a 422 and nothing
+        changes. Returns the new knowledge and whether it was written back.
+        """
+        if spec.name != name:
+            raise InvalidError.one(
+                ("body", "name"),
+                f"the class name in the body ({spec.name!r}) differs from the one in the path "
+                f"({name!r})",
+            )
+        with self._lock:
+            document = self._model.knowledge.document
+            classes = list(document.classes)
+            where = next((i for i, c in enumerate(classes) if c.name == name), None)
+            if where is None:
+                where = len(classes)
+                classes.append(spec)
+            else:
+                classes[where] = spec
+            new_document = KnowledgeDocument.model_validate(
+                {**dict(document), "classes": tuple(classes)}
+            )
+            source = self._model.knowledge.source
+            try:
+                knowledge = resolve(new_document, source)
+            except KnowledgeError as error:
+                raise InvalidError(
+                    [_knowledge_item(p.path, p.message, where) for p in error.problems]
+                ) from error
+            try:
+                self._model.replace_knowledge(knowledge)
+            except ValueError as error:
+                raise ConflictError(
+                    f"the edit conflicts with the tracked objects: {error}"
+                ) from None
+            written = False
+            if self.write_back and self.knowledge_path is not None:
+                from semwm.knowledge.loader import dump_document
+
+                dump_document(new_document, self.knowledge_path)
+                written = True
+            return knowledge, written
+
+    def reload(self) -> Knowledge:
+        """Re-read the knowledge file; a broken file leaves the running knowledge as it is."""
+        path = self.knowledge_path
+        if path is None:
+            raise ConflictError("this service has no knowledge file to reload")
+        try:
+            knowledge = load_knowledge(path)
+        except KnowledgeError as error:
+            raise KnowledgeFileError(
+                f"{path} has {len(error.problems)} problem(s); the running knowledge is unchanged",
+                [str(p) for p in error.problems],
+            ) from error
+        except OSError as error:
+            raise KnowledgeFileError(
+                f"cannot read {path}; the running knowledge is unchanged",
+                [f"{path}: {error.strerror or error}"],
+            ) from error
+        with self._lock:
+            try:
+                self._model.replace_knowledge(knowledge)
+            except ValueError as error:
+                raise ConflictError(
+                    f"the reloaded knowledge conflicts with the tracked objects: {error}"
+                ) from None
+        return knowledge
+
+
+def _knowledge_item(path: Sequence[str | int], message: str, index: int) -> dict[str, Any]:
+    """A knowledge problem as a 422 item: inside the edited class, relative to the body."""
+    parts = list(path)
+    if len(parts) >= 2 and parts[0] == "classes" and parts[1] == index:
+        loc: list[str | int] = ["body", *parts[2:]]
+    else:
+        loc = ["knowledge", *parts]
+    return {"loc": loc, "msg": message, "type": "knowledge", "path": parts}

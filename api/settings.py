@@ -1,0 +1,42 @@
+"""Service settings: command-line options and ``SEMWM_*`` environment variables."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """What the service needs to start.
+
+    Every field can be set from an environment variable named ``SEMWM_<FIELD>``
+    (``SEMWM_KNOWLEDGE``, ``SEMWM_PORT``, ...); values given to the constructor
+    (the command line) win over the environment.
+
+    Attributes
+    ----------
+    knowledge
+        The knowledge file (YAML or XML) the world model is built from.
+    host, port
+        Where to listen. Loopback by default: the API has no authentication.
+    reorder_window
+        Detections up to this many seconds older than the latest processed one are
+        still accepted (re-ordered); older ones are refused with 409.
+    max_batch
+        The largest batch ``POST /detections`` accepts.
+    write_back
+        Write accepted ``PUT /knowledge/classes/{name}`` edits back to the knowledge
+        file (atomically).
+    """
+
+    model_config = SettingsConfigDict(env_prefix="SEMWM_", frozen=True, extra="ignore")
+
+    knowledge: Path | None = None
+    host: str = "127.0.0.1"
+    port: Annotated[int, Field(ge=0, le=65535)] = 8000
+    reorder_window: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 0.5
+    max_batch: Annotated[int, Field(ge=1)] = 10000
+    write_back: bool = False
