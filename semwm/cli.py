@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
+from api.cli import add_serve_command
 from semwm.cli_knowledge import add_knowledge_commands
 
 
@@ -12,6 +13,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="semwm", description=__doc__)
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     add_knowledge_commands(subparsers)
+    add_serve_command(subparsers)
     return parser
 
 
