@@ -26,9 +26,9 @@ FloatArray = NDArray[np.float64]
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
 
-def imm_mix(x: FloatArray, P: FloatArray, mu: FloatArray, T: FloatArray) -> tuple[
-    FloatArray, FloatArray, FloatArray
-]:
+def imm_mix(
+    x: FloatArray, P: FloatArray, mu: FloatArray, T: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """IMM interaction (mixing) step.
 
     .. math::

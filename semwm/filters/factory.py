@@ -58,15 +58,15 @@ class ClassFilter:
         K = z.shape[0]
         x = np.zeros((K, self.modes, self.state_size))
         x[:, :, : self.dim] = z[:, None, :]
-        P = np.broadcast_to(self.initial_covariance, (K, self.modes, *self.initial_covariance.shape))
+        P = np.broadcast_to(
+            self.initial_covariance, (K, self.modes, *self.initial_covariance.shape)
+        )
         mu = np.broadcast_to(self.initial_mode_probabilities, (K, self.modes))
         return x, P.copy(), mu.copy()
 
     def models(self, dt: FloatArray) -> tuple[FloatArray, FloatArray]:
         """F and Q per object and mode for time steps ``dt``; each ``(N, M, n, n)``."""
-        Fs = [
-            transition_matrices(order, self.dim, dt, self.with_velocity) for order in self.orders
-        ]
+        Fs = [transition_matrices(order, self.dim, dt, self.with_velocity) for order in self.orders]
         Qs = [
             process_noises(
                 order, self.dim, dt, Qc, self.with_velocity, self.stationary_velocity_variance
@@ -98,7 +98,9 @@ class ClassFilter:
         """Update with measured positions; see :func:`semwm.filters.batched.update`."""
         return batched.update(x, P, mu, z, R)
 
-    def combine(self, x: FloatArray, P: FloatArray, mu: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def combine(
+        self, x: FloatArray, P: FloatArray, mu: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
         """Combined mean ``(N, n)`` and covariance ``(N, n, n)``."""
         return batched.combine(x, P, mu)
 

@@ -119,7 +119,7 @@ FilterSpec = Annotated[KalmanFilterSpec | IMMFilterSpec, Field(discriminator="ty
 
 
 class AppearanceRelation(Frozen):
-    """"A <class> appears within ``max_distance`` of a ``target`` every 1/frequency s".
+    """ "A <class> appears within ``max_distance`` of a ``target`` every 1/frequency s".
 
     Paper 002 eq. (4): f_new(o, h) = max over o' in h of f_presence(o, o').
     """

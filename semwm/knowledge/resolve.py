@@ -80,7 +80,9 @@ def _transition_problems(spec: IMMFilterSpec, path: Path) -> list[Problem]:
     problems = []
     for i, row in enumerate(matrix):
         if any(value < 0.0 or value > 1.0 for value in row):
-            problems.append(Problem(f"transition matrix row {i + 1} has entries outside [0, 1]", where))
+            problems.append(
+                Problem(f"transition matrix row {i + 1} has entries outside [0, 1]", where)
+            )
         elif abs(sum(row) - 1.0) > 1e-9:
             problems.append(
                 Problem(
@@ -94,11 +96,15 @@ def _transition_problems(spec: IMMFilterSpec, path: Path) -> list[Problem]:
         where = (*path, "initial_mode_probabilities")
         if len(initial) != modes:
             problems.append(
-                Problem(f"initial mode probabilities need {modes} values; found {len(initial)}", where)
+                Problem(
+                    f"initial mode probabilities need {modes} values; found {len(initial)}", where
+                )
             )
         elif any(p < 0.0 for p in initial) or abs(sum(initial) - 1.0) > 1e-9:
             problems.append(
-                Problem(f"initial mode probabilities must be >= 0 and sum to 1; found {initial}", where)
+                Problem(
+                    f"initial mode probabilities must be >= 0 and sum to 1; found {initial}", where
+                )
             )
     return problems
 
@@ -116,19 +122,23 @@ def _class_spec_problems(spec: ClassSpec, dim: int, path: Path) -> list[Problem]
         if isinstance(spec.filter, IMMFilterSpec):
             for m, model in enumerate(spec.filter.models):
                 problems += matrix_problems(
-                    model.system_noise, dim, "system noise", (*filter_path, "models", m, "system_noise")
+                    model.system_noise,
+                    dim,
+                    "system noise",
+                    (*filter_path, "models", m, "system_noise"),
                 )
             problems += _transition_problems(spec.filter, filter_path)
         else:
             problems += matrix_problems(
-                spec.filter.model.system_noise, dim, "system noise", (*filter_path, "model", "system_noise")
+                spec.filter.model.system_noise,
+                dim,
+                "system noise",
+                (*filter_path, "model", "system_noise"),
             )
     return problems
 
 
-def _ancestry(
-    name: str, parents: dict[str, tuple[str, ...]]
-) -> Iterator[str]:
+def _ancestry(name: str, parents: dict[str, tuple[str, ...]]) -> Iterator[str]:
     """Depth-first, first-parent-first walk over the ancestors of ``name`` (no repeats)."""
     seen: set[str] = set()
     stack = list(reversed(parents.get(name, ())))
@@ -177,7 +187,9 @@ def _duplicates(names: Sequence[str], what: str, root: str) -> list[Problem]:
     return problems
 
 
-def _resolve(document: KnowledgeDocument, source: str | None) -> tuple[list[Problem], Knowledge | None]:
+def _resolve(
+    document: KnowledgeDocument, source: str | None
+) -> tuple[list[Problem], Knowledge | None]:
     dim = document.world.dimension
     specs = document.classes
     index = {spec.name: i for i, spec in enumerate(specs)}
@@ -246,7 +258,9 @@ def _resolve(document: KnowledgeDocument, source: str | None) -> tuple[list[Prob
             ancestors=tuple(_ancestry(spec.name, parents)),
             detection_frequency=values["detection_frequency"],
             new_frequency=(
-                values["new_frequency"] if values["new_frequency"] is not None else DEFAULT_NEW_FREQUENCY
+                values["new_frequency"]
+                if values["new_frequency"] is not None
+                else DEFAULT_NEW_FREQUENCY
             ),
             appearance=values["appearance"] or (),
             filter=values["filter"],
@@ -277,7 +291,9 @@ def _resolve(document: KnowledgeDocument, source: str | None) -> tuple[list[Prob
     if region is not None:
         if len(region) != dim:
             problems.append(
-                Problem(f"region needs {dim} [min, max] pairs; found {len(region)}", ("world", "region"))
+                Problem(
+                    f"region needs {dim} [min, max] pairs; found {len(region)}", ("world", "region")
+                )
             )
         elif any(low >= high for low, high in region):
             problems.append(Problem("region pairs must have min < max", ("world", "region")))

@@ -1,0 +1,253 @@
+"""Per-scan association: gating, batched updates, priors and likelihoods.
+
+Everything a scan's hypothesis expansion needs is computed here once per scan,
+batched with numpy, for the distinct objects only: each stored object version is
+predicted once, gated against every detection of the scan (class and Mahalanobis
+gates), and updated once per detection that passes the gate. Within a scan an
+object can take at most one detection, so the gate is computed against the
+versions that existed before the scan.
+
+Two association models (``world.association_model``):
+
+``paper`` (paper 002 eqs. (5)-(8))
+    clutter ``f_clutter / F``, new ``f_new(o, h) / F``, existing
+    ``f_existing(C(o)) / F * L_class * exp(-1/2 delta^T Sigma^-1 delta)`` with
+    ``delta = z - H x+`` (the updated position) and ``Sigma = R``.
+``mht`` (the standard MHT model)
+    the same rates, but spread in space: clutter and base births uniform over the
+    region (density ``1 / V``), births from an appearance relation uniform over the
+    disc (ball) of its ``max_distance``, and an existing object's likelihood the
+    predicted measurement density ``N(z; H x-, S)`` of its filter.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from semwm.filters.batched import mahalanobis_squared
+from semwm.filters.factory import FilterFactory
+from semwm.filters.motion import FloatArray
+from semwm.knowledge.model import Knowledge
+from semwm.knowledge.taxonomy import Taxonomy
+from semwm.mhf.measurement import Measurement
+from semwm.mhf.predict import Predicted, conform
+from semwm.mhf.state import Track
+
+
+@dataclass(frozen=True)
+class DetectionOptions:
+    """What one detection can be, with the log numerators of its priors times likelihoods.
+
+    Attributes
+    ----------
+    clutter_rate, log_clutter
+        f_clutter and the log numerator of the clutter child.
+    new_track, new_rate, new_log
+        The new object it would be, and the base f_new (class rate or a known map
+        object's relation) with its log numerator.
+    presence
+        Object key -> (rate, log numerator) for objects whose presence makes a new
+        object here likelier than the base (eq. 4); only counted in hypotheses
+        holding that object.
+    existing
+        Object key -> (updated version, log numerator, rate change) for each object
+        that passed the gates.
+    """
+
+    measurement: Measurement
+    clutter_rate: float
+    log_clutter: float
+    new_track: Track
+    new_rate: float
+    new_log: float
+    presence: dict[int, tuple[float, float]]
+    existing: dict[int, tuple[Track, float, float]]
+
+
+def _log(value: float) -> float:
+    return math.log(value) if value > 0.0 else -math.inf
+
+
+def ball_volume(radius: float, dim: int) -> float:
+    return math.pi * radius**2 if dim == 2 else 4.0 / 3.0 * math.pi * radius**3
+
+
+class Associator:
+    """Builds the :class:`DetectionOptions` of a scan for one knowledge base."""
+
+    def __init__(self, knowledge: Knowledge, factory: FilterFactory, taxonomy: Taxonomy) -> None:
+        self.knowledge = knowledge
+        self.factory = factory
+        self.taxonomy = taxonomy
+        self.dim = knowledge.world.dimension
+        self.model = knowledge.world.association_model
+        p = knowledge.world.gate_probability
+        if p >= 1.0:
+            self.gate = math.inf
+        else:
+            from scipy.stats import chi2
+
+            self.gate = float(chi2.ppf(p, self.dim))
+        region = knowledge.world.region
+        self.log_volume = (
+            sum(math.log(high - low) for low, high in region) if region is not None else 0.0
+        )
+        if self.model == "mht" and region is None:
+            raise ValueError("association_model 'mht' needs world.region (to spread clutter)")
+
+    def _spread(self, radius: float) -> float:
+        """Log spatial density of a birth within ``radius`` (mht model), else 0."""
+        return -math.log(ball_volume(radius, self.dim)) if self.model == "mht" else 0.0
+
+    def options(
+        self,
+        predicted: Predicted,
+        measurements: Sequence[Measurement],
+        new_key: Callable[[], int],
+    ) -> list[DetectionOptions]:
+        tracks = predicted.tracks
+        classes = self.knowledge.classes
+        existing = self._existing(predicted, measurements, new_key)
+        spread_uniform = -self.log_volume if self.model == "mht" else 0.0
+        result = []
+        new_states = self._new_states(measurements)
+        for j, m in enumerate(measurements):
+            resolved = classes[m.cls]
+            base_rate = resolved.new_frequency
+            base_log = _log(base_rate) + spread_uniform
+            presence: dict[int, tuple[float, float]] = {}
+            for relation in resolved.appearance:
+                covered = self.taxonomy.covers(relation.target)
+                log_num = _log(relation.frequency) + self._spread(relation.max_distance)
+                for known in self.knowledge.known_objects:
+                    if (
+                        known.cls in covered
+                        and _distance(m.z, known.position) <= relation.max_distance
+                    ):
+                        if log_num > base_log:
+                            base_rate, base_log = relation.frequency, log_num
+                for i, track in enumerate(tracks):
+                    if track.cls in covered and (
+                        float(np.linalg.norm(m.z - predicted.position[i])) <= relation.max_distance
+                    ):
+                        if log_num > presence.get(track.key, (0.0, -math.inf))[1]:
+                            presence[track.key] = (relation.frequency, log_num)
+            presence = {k: v for k, v in presence.items() if v[1] > base_log}
+            x, P, mu = new_states[j]
+            new_track = Track(
+                new_key(),
+                m.seq,
+                m.cls,
+                m.label,
+                x,
+                P,
+                mu,
+                m.time,
+                m.time,
+                m.time,
+                resolved.detection_frequency,
+            )
+            result.append(
+                DetectionOptions(
+                    measurement=m,
+                    clutter_rate=m.clutter_rate,
+                    log_clutter=_log(m.clutter_rate) + spread_uniform,
+                    new_track=new_track,
+                    new_rate=base_rate,
+                    new_log=base_log,
+                    presence=presence,
+                    existing=existing[j],
+                )
+            )
+        return result
+
+    def _new_states(
+        self, measurements: Sequence[Measurement]
+    ) -> list[tuple[FloatArray, FloatArray, FloatArray]]:
+        states: list[tuple[FloatArray, FloatArray, FloatArray]] = []
+        for m in measurements:
+            x, P, mu = self.factory.filter_for(m.cls).initial_states(m.z[None, :])
+            states.append((x[0], P[0], mu[0]))
+        return states
+
+    def _existing(
+        self,
+        predicted: Predicted,
+        measurements: Sequence[Measurement],
+        new_key: Callable[[], int],
+    ) -> list[dict[int, tuple[Track, float, float]]]:
+        """Gate every (detection, object) pair and update the pairs that pass."""
+        tracks = predicted.tracks
+        found: list[dict[int, tuple[Track, float, float]]] = [{} for _ in measurements]
+        if not tracks or not measurements:
+            return found
+        z = np.stack([m.z for m in measurements])  # (D, d)
+        R = np.stack([m.R for m in measurements])  # (D, d, d)
+        likelihood = np.array(
+            [[self.taxonomy.class_likelihood(t.cls, m.cls) for t in tracks] for m in measurements]
+        )  # (D, T): L_class of eq. (8)
+        candidate = likelihood > 0.0
+        diff = z[:, None, :] - predicted.position[None, :, :]  # (D, T, d)
+        if math.isfinite(self.gate):
+            # Cheap bound first: d^2 <= gate * lambda_max(S) <= gate * trace(S).
+            bound = self.gate * (
+                np.trace(predicted.position_covariance, axis1=1, axis2=2)[None, :]
+                + np.trace(R, axis1=1, axis2=2)[:, None]
+            )
+            candidate &= (diff * diff).sum(-1) <= bound
+        jj, ii = np.nonzero(candidate)
+        if jj.size == 0:
+            return found
+        S = predicted.position_covariance[ii] + R[jj]
+        d2 = mahalanobis_squared(diff[jj, ii], S)
+        passed = d2 <= self.gate
+        jj, ii = jj[passed], ii[passed]
+        by_class: dict[str, list[int]] = {}
+        for p, i in enumerate(ii):
+            by_class.setdefault(tracks[i].cls, []).append(p)
+        classes = self.knowledge.classes
+        d = self.dim
+        for cls, pairs in by_class.items():
+            flt = self.factory.filter_for(cls)
+            rows_i = ii[pairs]
+            rows_j = jj[pairs]
+            x = np.stack([predicted.x[i] for i in rows_i])
+            P = np.stack([predicted.P[i] for i in rows_i])
+            mu = np.stack([predicted.mu[i] for i in rows_i])
+            x_new, P_new, mu_new, log_lik = flt.update(x, P, mu, z[rows_j], R[rows_j])
+            if self.model == "paper":
+                x_hat, _ = flt.combine(x_new, P_new, mu_new)
+                delta = z[rows_j] - x_hat[:, :d]
+                log_lik = -0.5 * mahalanobis_squared(delta, R[rows_j])
+            for row, (i, j) in enumerate(zip(rows_i, rows_j, strict=True)):
+                old = tracks[i]
+                m = measurements[j]
+                refined = self.taxonomy.most_specific(old.cls, m.cls)
+                xs, Ps, mus = x_new[row], P_new[row], mu_new[row]
+                if refined != old.cls:
+                    xs, Ps, mus = conform(xs, Ps, mus, flt, self.factory.filter_for(refined))
+                rate = classes[refined].detection_frequency
+                updated = Track(
+                    new_key(),
+                    old.lineage,
+                    refined,
+                    m.label if m.label is not None else old.label,
+                    xs,
+                    Ps,
+                    mus,
+                    m.time,
+                    m.time,
+                    old.created,
+                    rate,
+                )
+                log_num = _log(old.rate) + math.log(likelihood[j, i]) + float(log_lik[row])
+                found[j][old.key] = (updated, log_num, rate - old.rate)
+        return found
+
+
+def _distance(z: FloatArray, position: Sequence[float]) -> float:
+    return float(np.linalg.norm(z - np.asarray(position, dtype=float)))

@@ -1,0 +1,206 @@
+"""The knowledge-driven Multiple Hypothesis Filter (paper 002 Section III, paper 000 III).
+
+One call processes one scan (detections with the same source and time):
+
+1. every stored object version is predicted to the scan time (lazily: from its
+   own last update, batched per class filter);
+2. objects that became too uncertain (P_max, paper 002 III-E) or went unseen too
+   long (paper 000 C3) are removed from every hypothesis;
+3. the scan's options are computed once (:mod:`semwm.mhf.association`);
+4. detection by detection, every hypothesis is expanded into clutter, a new
+   object, and each gated existing object it holds (eq. 1 in log space), the
+   labeling rules of paper 000 III-B are applied, identical hypotheses merged and
+   the tree pruned (eq. 3 and n_hyp,max);
+5. object versions no hypothesis refers to are dropped.
+
+The filter is pure: it returns a new :class:`MHFState` and never changes one.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from semwm.filters.factory import FilterFactory
+from semwm.knowledge.model import Knowledge
+from semwm.knowledge.taxonomy import Taxonomy
+from semwm.mhf.association import Associator, DetectionOptions
+from semwm.mhf.measurement import Measurement
+from semwm.mhf.predict import Predicted, predict_tracks
+from semwm.mhf.prune import merge, prune
+from semwm.mhf.state import Hypothesis, MHFState, Track
+
+
+class _TrackTable:
+    """The scan's working track table: new versions get keys here."""
+
+    def __init__(self, state: MHFState) -> None:
+        self.tracks: dict[int, Track] = dict(state.tracks)
+        self.next_key = state.next_key
+        self.by_label: dict[str, set[int]] = {}
+        for track in self.tracks.values():
+            if track.label is not None:
+                self.by_label.setdefault(track.label, set()).add(track.key)
+        self._unlabeled: dict[int, int] = {}
+
+    def new_key(self) -> int:
+        key = self.next_key
+        self.next_key += 1
+        return key
+
+    def add(self, track: Track) -> None:
+        self.tracks[track.key] = track
+        if track.label is not None:
+            self.by_label.setdefault(track.label, set()).add(track.key)
+
+    def unlabeled(self, key: int) -> int:
+        """The version of ``key`` that gave its label up (paper 000 III-B: the older of two
+        objects with one label gets a new unique label; its id serves as that label)."""
+        done = self._unlabeled.get(key)
+        if done is None:
+            copy = self.tracks[key].relabeled(self.new_key(), None)
+            self.add(copy)
+            done = self._unlabeled[key] = copy.key
+        return done
+
+
+class MultipleHypothesisFilter:
+    """The MHF for one knowledge base."""
+
+    def __init__(self, knowledge: Knowledge) -> None:
+        self.knowledge = knowledge
+        self.taxonomy = Taxonomy({name: c.parents for name, c in knowledge.classes.items()})
+        self.factory = FilterFactory(knowledge)
+        self.associator = Associator(knowledge, self.factory, self.taxonomy)
+        self.ratio = knowledge.world.pruning_ratio
+        self.max_hypotheses = knowledge.world.max_hypotheses
+
+    def predict(self, state: MHFState, keys: Sequence[int], time: float) -> Predicted:
+        return predict_tracks([state.tracks[k] for k in keys], time, self.factory)
+
+    def leaving(self, predicted: Predicted, time: float) -> set[int]:
+        """Keys of objects to remove from every hypothesis at ``time``: position covariance
+        above the class's P_max (paper 002 III-E) or unseen longer than its maximum (C3)."""
+        gone: set[int] = set()
+        if not predicted.tracks:
+            return gone
+        largest = np.linalg.eigvalsh(predicted.position_covariance)[:, -1]
+        classes = self.knowledge.classes
+        for i, track in enumerate(predicted.tracks):
+            spec = classes.get(track.cls)
+            if spec is None:
+                gone.add(track.key)
+                continue
+            if (
+                spec.max_position_variance is not None and largest[i] > spec.max_position_variance
+            ) or (
+                spec.max_time_without_update is not None
+                and time - track.last_seen > spec.max_time_without_update
+            ):
+                gone.add(track.key)
+        return gone
+
+    def process_scan(self, state: MHFState, measurements: Sequence[Measurement]) -> MHFState:
+        """Process one scan: detections sharing a source and a time."""
+        if not measurements:
+            return state
+        time = measurements[0].time
+        table = _TrackTable(state)
+        keys = list(state.tracks)
+        predicted = self.predict(state, keys, time)
+        gone = self.leaving(predicted, time)
+        hypotheses = state.hypotheses
+        if gone:
+            hypotheses = _without(hypotheses, gone, table.tracks)
+            alive = [i for i, k in enumerate(keys) if k not in gone]
+            predicted = _subset(predicted, alive)
+        options = self.associator.options(predicted, measurements, table.new_key)
+        for option in options:
+            table.add(option.new_track)
+            for updated, _, _ in option.existing.values():
+                table.add(updated)
+            hypotheses = self._expand(hypotheses, option, table)
+        referenced: set[int] = set().union(*(h.tracks for h in hypotheses))
+        tracks = {k: table.tracks[k] for k in referenced}
+        return MHFState(hypotheses, tracks, time, table.next_key)
+
+    def _expand(
+        self, hypotheses: Sequence[Hypothesis], option: DetectionOptions, table: _TrackTable
+    ) -> tuple[Hypothesis, ...]:
+        """Children of every hypothesis for one detection (eq. 1 with eqs. 4-8), merged and
+        pruned."""
+        children: list[tuple[frozenset[int], float, float]] = []
+        new_key = option.new_track.key
+        new_rate = option.new_track.rate
+        presence = option.presence
+        presence_keys = presence.keys()
+        existing = option.existing
+        existing_keys = existing.keys()
+        label = option.measurement.label
+        per_parent = self.associator.model == "paper"
+        for h in hypotheses:
+            tracks = h.tracks
+            birth_rate, birth_log = option.new_rate, option.new_log
+            for k in presence_keys & tracks:
+                rate, log_num = presence[k]
+                if log_num > birth_log:
+                    birth_rate, birth_log = rate, log_num
+            log_norm = h.log_weight
+            if per_parent:  # paper 002 eqs. (5)-(7): F sums the frequencies open to this parent
+                log_norm -= math.log(option.clutter_rate + birth_rate + h.rate)
+            if option.log_clutter > -math.inf:
+                children.append((tracks, log_norm + option.log_clutter, h.rate))
+            if birth_log > -math.inf:
+                child = tracks | {new_key}
+                if label is not None:
+                    child = _give_label(child, new_key, label, table)
+                children.append((child, log_norm + birth_log, h.rate + new_rate))
+            for k in existing_keys & tracks:
+                updated, log_num, rate_change = existing[k]
+                child = (tracks - {k}) | {updated.key}
+                if label is not None:
+                    child = _give_label(child, updated.key, label, table)
+                children.append((child, log_norm + log_num, h.rate + rate_change))
+        if not children:  # nothing can explain it: a knowledge base with no clutter or births
+            return tuple(hypotheses)
+        return prune(merge(children), self.ratio, self.max_hypotheses)
+
+
+def _give_label(
+    child: frozenset[int], holder: int, label: str, table: _TrackTable
+) -> frozenset[int]:
+    """Paper 000 III-B: the object that took the labeled detection holds the label; any
+    other object of the hypothesis with that label gives it up."""
+    others = (table.by_label.get(label, set()) & child) - {holder}
+    if not others:
+        return child
+    return (child - others) | {table.unlabeled(k) for k in others}
+
+
+def _without(
+    hypotheses: Sequence[Hypothesis], gone: set[int], tracks: dict[int, Track]
+) -> tuple[Hypothesis, ...]:
+    """Remove objects from every hypothesis; hypotheses that become identical merge."""
+    children = []
+    for h in hypotheses:
+        removed = h.tracks & gone
+        if removed:
+            rate = h.rate - sum(tracks[k].rate for k in removed)
+            children.append((h.tracks - removed, h.log_weight, rate))
+        else:
+            children.append((h.tracks, h.log_weight, h.rate))
+    return prune(merge(children), 0.0, len(children))
+
+
+def _subset(predicted: Predicted, rows: list[int]) -> Predicted:
+    return Predicted(
+        tuple(predicted.tracks[i] for i in rows),
+        [predicted.x[i] for i in rows],
+        [predicted.P[i] for i in rows],
+        [predicted.mu[i] for i in rows],
+        [predicted.state_mean[i] for i in rows],
+        predicted.position[rows],
+        predicted.position_covariance[rows],
+    )

@@ -1,0 +1,93 @@
+"""Lazy prediction of stored object versions to a given time, batched per class filter."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from semwm.filters.factory import ClassFilter, FilterFactory
+from semwm.filters.motion import FloatArray
+from semwm.mhf.state import Track
+
+
+def conform(
+    x: FloatArray, P: FloatArray, mu: FloatArray, source: ClassFilter | None, target: ClassFilter
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Carry a state over to another class's filter when its structure differs (a track
+    refined from ``Can`` to ``CokeCan``, or knowledge edited while running).
+
+    The combined position (and velocity, when both filters have one) and their
+    covariances are kept; other entries start as a new object's would.
+    """
+    if x.shape == (target.modes, target.state_size):
+        return x, P, mu
+    d = target.dim
+    if x.shape[0] == 1:
+        x_hat, P_hat = x[0], P[0]
+    else:
+        x_hat = mu @ x
+        spread = x - x_hat
+        P_hat = np.einsum("m,mij->ij", mu, P) + np.einsum("m,mi,mj->ij", mu, spread, spread)
+    keep = min(x_hat.shape[0], target.state_size)
+    new_x = np.zeros(target.state_size)
+    new_x[:keep] = x_hat[:keep]
+    new_P = target.initial_covariance.copy()
+    new_P[:keep, :keep] = P_hat[:keep, :keep]
+    if keep < d:  # pragma: no cover - every filter measures the whole position
+        raise ValueError("a filter state must hold the position")
+    modes = target.modes
+    return (
+        np.repeat(new_x[None], modes, axis=0),
+        np.repeat(new_P[None], modes, axis=0),
+        target.initial_mode_probabilities.copy(),
+    )
+
+
+@dataclass(frozen=True)
+class Predicted:
+    """Object versions predicted to one time, in the order they were given.
+
+    ``x``, ``P``, ``mu`` are lists of per-track arrays (filters differ in size);
+    ``position`` ``(N, d)`` and ``position_covariance`` ``(N, d, d)`` are stacked.
+    """
+
+    tracks: tuple[Track, ...]
+    x: list[FloatArray]
+    P: list[FloatArray]
+    mu: list[FloatArray]
+    state_mean: list[FloatArray]
+    position: FloatArray
+    position_covariance: FloatArray
+
+
+def predict_tracks(tracks: Sequence[Track], time: float, factory: FilterFactory) -> Predicted:
+    """Predict every track to ``time`` (s), one batched call per class filter."""
+    d = factory.dim
+    count = len(tracks)
+    xs: list[FloatArray] = [np.empty(0)] * count
+    Ps: list[FloatArray] = [np.empty(0)] * count
+    mus: list[FloatArray] = [np.empty(0)] * count
+    means: list[FloatArray] = [np.empty(0)] * count
+    position = np.zeros((count, d))
+    position_covariance = np.zeros((count, d, d))
+    groups: dict[str, list[int]] = defaultdict(list)
+    for i, track in enumerate(tracks):
+        groups[track.cls].append(i)
+    for cls, members in groups.items():
+        flt = factory.filter_for(cls)
+        states = [conform(tracks[i].x, tracks[i].P, tracks[i].mu, None, flt) for i in members]
+        x = np.stack([s[0] for s in states])
+        P = np.stack([s[1] for s in states])
+        mu = np.stack([s[2] for s in states])
+        dt = np.array([time - tracks[i].time for i in members])
+        x, P, mu = flt.predict(x, P, mu, dt)
+        x_hat, P_hat = flt.combine(x, P, mu)
+        idx = np.asarray(members)
+        position[idx] = x_hat[:, :d]
+        position_covariance[idx] = P_hat[:, :d, :d]
+        for row, i in enumerate(members):
+            xs[i], Ps[i], mus[i], means[i] = x[row], P[row], mu[row], x_hat[row]
+    return Predicted(tuple(tracks), xs, Ps, mus, means, position, position_covariance)

@@ -1,0 +1,127 @@
+"""Turning user detections into MHF measurements, or saying exactly what is wrong."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+from semwm.detection import Detection, DetectionError, DetectionProblem
+from semwm.filters.factory import FilterFactory
+from semwm.knowledge.model import Knowledge
+from semwm.mhf.measurement import Measurement
+
+DetectionInput = Detection | Mapping[str, Any]
+
+
+def as_batch(detections: DetectionInput | Iterable[DetectionInput]) -> list[DetectionInput]:
+    """One detection or an iterable of them, as a list."""
+    if isinstance(detections, Detection | Mapping):
+        return [detections]
+    return list(detections)
+
+
+def parse(batch: list[DetectionInput]) -> list[Detection]:
+    """Parse dicts into :class:`Detection` values; every problem is collected."""
+    problems: list[DetectionProblem] = []
+    parsed: list[Detection] = []
+    for index, item in enumerate(batch):
+        if isinstance(item, Detection):
+            parsed.append(item)
+            continue
+        try:
+            parsed.append(Detection.model_validate(item))
+        except ValidationError as error:
+            for e in error.errors():
+                loc = tuple("class" if p == "cls" else p for p in e["loc"])
+                problems.append(DetectionProblem(path=(index, *loc), message=e["msg"]))
+    if problems:
+        raise DetectionError(problems)
+    return parsed
+
+
+def _square_problem(matrix: object, d: int, what: str) -> str | None:
+    array = np.asarray(matrix, dtype=float)
+    if array.shape != (d, d):
+        return f"{what} must be {d} x {d}; found shape {array.shape}"
+    if not np.allclose(array, array.T, rtol=1e-9, atol=1e-12):
+        return f"{what} must be symmetric"
+    if np.linalg.eigvalsh(array).min() <= 0.0:
+        return f"{what} must be positive definite"
+    return None
+
+
+def check(
+    detections: list[Detection], knowledge: Knowledge, factory: FilterFactory, first_seq: int
+) -> list[Measurement]:
+    """Check detections against the knowledge and resolve their noise and clutter rates.
+
+    Raises
+    ------
+    DetectionError
+        With the path (index in the batch, field) and message of every problem.
+    """
+    d = knowledge.world.dimension
+    problems: list[DetectionProblem] = []
+    known_classes = ", ".join(sorted(knowledge.classes))
+    known_detectors = ", ".join(knowledge.detectors)
+    measurements: list[Measurement] = []
+    for index, det in enumerate(detections):
+        found: list[DetectionProblem] = []
+
+        def problem(field: str, message: str, found: list[DetectionProblem] = found) -> None:
+            found.append(DetectionProblem(path=(index, field), message=message))
+
+        if det.cls not in knowledge.classes:
+            problem("class", f"unknown class {det.cls!r}; known classes: {known_classes}")
+        if len(det.position) != d:
+            problem("position", f"position must have {d} coordinates; found {len(det.position)}")
+        detector = det.detector if det.detector is not None else knowledge.default_detector
+        if detector not in knowledge.detectors:
+            problem(
+                "detector", f"unknown detector {detector!r}; known detectors: {known_detectors}"
+            )
+        if det.covariance is not None:
+            message = _square_problem(det.covariance, d, "covariance")
+            if message is not None:
+                problem("covariance", message)
+        if det.sensor_position is not None and len(det.sensor_position) != d:
+            problem(
+                "sensor_position",
+                f"sensor position must have {d} coordinates; found {len(det.sensor_position)}",
+            )
+        if found:
+            problems.extend(found)
+            continue
+        R = (
+            np.asarray(det.covariance, dtype=float)
+            if det.covariance is not None
+            else factory.measurement_noise(det.cls, detector)
+        )
+        measurements.append(
+            Measurement(
+                seq=first_seq + index,
+                time=det.time,
+                cls=det.cls,
+                z=np.asarray(det.position, dtype=float),
+                R=R,
+                detector=detector,
+                source=det.source,
+                label=det.label,
+                clutter_rate=knowledge.detectors[detector].clutter_frequency,
+            )
+        )
+    if problems:
+        raise DetectionError(problems)
+    return measurements
+
+
+def out_of_range(det: Detection, knowledge: Knowledge) -> bool:
+    """Paper 000 C2: the detection lies outside its detector's range from the sensor."""
+    detector = knowledge.detectors[det.detector or knowledge.default_detector]
+    if detector.range is None or det.sensor_position is None:
+        return False
+    offset = np.asarray(det.position) - np.asarray(det.sensor_position)
+    return bool(np.linalg.norm(offset) > detector.range)

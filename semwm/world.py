@@ -1,0 +1,395 @@
+"""The facade users call: ingest detections, query the world.
+
+>>> from semwm import WorldModel, load_knowledge
+>>> wm = WorldModel(load_knowledge("knowledge/sim1.yaml"))      # doctest: +SKIP
+>>> wm.ingest({"time": 0.0, "class": "Cup", "position": [1.0, 2.0]})  # doctest: +SKIP
+>>> wm.world().objects                                             # doctest: +SKIP
+
+The world model owns the only mutable state: the current :class:`MHFState`, the
+scans kept for the reorder window, and the map from object lineages to public
+ids. A batch is validated whole before anything changes; a rejected batch
+changes nothing.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from semwm.detection import OutOfOrderError
+from semwm.filters.motion import FloatArray
+from semwm.knowledge.model import Knowledge
+from semwm.knowledge.taxonomy import Taxonomy
+from semwm.mhf.filter import MultipleHypothesisFilter, _without
+from semwm.mhf.measurement import Measurement
+from semwm.mhf.predict import Predicted
+from semwm.mhf.state import MHFState, Track
+from semwm.validation import DetectionInput, as_batch, check, out_of_range, parse
+from semwm.world_types import HypothesisObject, HypothesisSummary, WorldObject, WorldState
+
+ScanKey = tuple[float, str]
+_HANDOVER_GATE = 13.8  # chi-square 99.9 % for 2 degrees of freedom; ids move only this close
+
+
+@dataclass(frozen=True)
+class IngestResult:
+    """How many detections were applied, how many ignored (outside their detector's
+    range, paper 000 C2), and the world time after them."""
+
+    applied: int
+    time: float | None
+    ignored: int = 0
+
+
+@dataclass(frozen=True)
+class _LoggedScan:
+    key: ScanKey
+    measurements: tuple[Measurement, ...]
+    before: MHFState
+
+
+@dataclass(frozen=True)
+class _Published:
+    lineage: int
+    cls: str
+    position: FloatArray
+    covariance: FloatArray
+
+
+def _scan_key(m: Measurement) -> ScanKey:
+    return (m.time, m.source or "")
+
+
+def _summary_position(track: Track, dim: int) -> tuple[FloatArray, FloatArray]:
+    """Combined position and covariance of a stored version (no prediction)."""
+    x = track.mu @ track.x[:, :dim]
+    P = np.einsum("m,mij->ij", track.mu, track.P[:, :dim, :dim])
+    return x, P
+
+
+class WorldModel:
+    """A semantic world model: a knowledge-driven MHF with a query interface.
+
+    Parameters
+    ----------
+    knowledge
+        Resolved knowledge (:func:`semwm.load_knowledge`).
+    reorder_window
+        Detections may arrive up to this many seconds (s) late and are still
+        processed in time order (the scans after them are replayed); older ones
+        raise :class:`~semwm.detection.OutOfOrderError`.
+    """
+
+    def __init__(self, knowledge: Knowledge, *, reorder_window: float = 0.0) -> None:
+        if reorder_window < 0 or not math.isfinite(reorder_window):
+            raise ValueError(f"reorder_window must be a finite number >= 0; got {reorder_window}")
+        self.reorder_window = reorder_window
+        self._set_knowledge(knowledge)
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def _set_knowledge(self, knowledge: Knowledge) -> None:
+        self._knowledge = knowledge
+        self._mhf = MultipleHypothesisFilter(knowledge)
+
+    def reset(self) -> None:
+        """Forget every detection and object."""
+        self._state = MHFState.empty()
+        self._log: list[_LoggedScan] = []
+        self._seq = 0
+        self._ids: dict[int, int] = {}
+        self._next_id = 1
+        self._published: dict[int, _Published] = {}
+        self._lost: dict[int, _Published] = {}
+
+    @property
+    def knowledge(self) -> Knowledge:
+        return self._knowledge
+
+    @property
+    def taxonomy(self) -> Taxonomy:
+        return self._mhf.taxonomy
+
+    @property
+    def latest_time(self) -> float | None:
+        """Time of the latest processed detection (s)."""
+        return self._state.time
+
+    @property
+    def hypothesis_count(self) -> int:
+        return len(self._state.hypotheses)
+
+    @property
+    def object_count(self) -> int:
+        """Objects in the most probable hypothesis."""
+        return len(self._state.best.tracks)
+
+    @property
+    def track_count(self) -> int:
+        """Distinct object versions stored, shared by all hypotheses."""
+        return len(self._state.tracks)
+
+    def replace_knowledge(self, knowledge: Knowledge) -> None:
+        """Use new knowledge from the next detection on. Objects of classes it no longer
+        has are removed; the reorder window restarts (no replay across the change)."""
+        if knowledge.world.dimension != self._knowledge.world.dimension:
+            raise ValueError(
+                f"the new knowledge has dimension {knowledge.world.dimension}; the world has "
+                f"{self._knowledge.world.dimension}: reset first"
+            )
+        MultipleHypothesisFilter(knowledge)  # fail here, before anything changes
+        gone = {k for k, t in self._state.tracks.items() if t.cls not in knowledge.classes}
+        self._set_knowledge(knowledge)
+        if gone:
+            hypotheses = _without(self._state.hypotheses, gone, dict(self._state.tracks))
+            referenced = set().union(*(h.tracks for h in hypotheses))
+            tracks = {k: self._state.tracks[k] for k in referenced}
+            self._state = MHFState(hypotheses, tracks, self._state.time, self._state.next_key)
+            self._publish()
+        self._log = []
+
+    # ------------------------------------------------------------------ input
+    def validate(self, detections: DetectionInput | Iterable[DetectionInput]) -> list[Measurement]:
+        """Check detections without applying them; raises ``DetectionError``."""
+        parsed = parse(as_batch(detections))
+        return check(parsed, self._knowledge, self._mhf.factory, self._seq)
+
+    def ingest(self, detections: DetectionInput | Iterable[DetectionInput]) -> IngestResult:
+        """Apply detections (values or plain dicts), whole or not at all.
+
+        Raises
+        ------
+        DetectionError
+            A detection is malformed or does not fit the knowledge; nothing applied.
+        OutOfOrderError
+            A detection is older than the reorder window allows; nothing applied.
+        """
+        batch = as_batch(detections)
+        parsed = parse(batch)
+        measurements = check(parsed, self._knowledge, self._mhf.factory, self._seq)
+        used = [
+            m
+            for m, d in zip(measurements, parsed, strict=True)
+            if not out_of_range(d, self._knowledge)
+        ]
+        ignored = len(measurements) - len(used)
+        latest = self._state.time
+        if used and latest is not None:
+            earliest = min(m.time for m in used)
+            if earliest < latest - self.reorder_window - 1e-12:
+                raise OutOfOrderError(earliest, latest, self.reorder_window)
+        state, log = self._process(used)
+        self._state, self._log = state, log
+        self._seq += len(batch)
+        if used:
+            self._publish()
+        return IngestResult(applied=len(used), time=self._state.time, ignored=ignored)
+
+    def _process(self, measurements: Sequence[Measurement]) -> tuple[MHFState, list[_LoggedScan]]:
+        """Process new scans in time order, replaying logged scans they precede."""
+        if not measurements:
+            return self._state, self._log
+        scans: dict[ScanKey, list[Measurement]] = {}
+        for m in measurements:
+            scans.setdefault(_scan_key(m), []).append(m)
+        first = min(scans)
+        start = next((i for i, s in enumerate(self._log) if s.key >= first), len(self._log))
+        state = self._log[start].before if start < len(self._log) else self._state
+        for logged in self._log[start:]:
+            scans[logged.key] = [*logged.measurements, *scans.get(logged.key, [])]
+        log = self._log[:start]
+        for key in sorted(scans):
+            before = state
+            state = self._mhf.process_scan(state, scans[key])
+            log.append(_LoggedScan(key, tuple(scans[key]), before))
+        assert state.time is not None
+        horizon = state.time - self.reorder_window
+        log = [s for s in log if s.key[0] >= horizon] if self.reorder_window > 0 else []
+        return state, log
+
+    # ------------------------------------------------------------------ ids
+    def _publish(self) -> None:
+        """Give public ids to the MAP hypothesis's objects.
+
+        An object keeps its id as long as its lineage lives. A lineage new to the MAP
+        takes over the id of a published object that left the MAP (the MAP switched to
+        a hypothesis that explains the same object by another history) when they are
+        close (Mahalanobis) and of compatible classes; otherwise it gets the next id.
+        Ids are given only to published objects, so discarded branches burn none.
+        """
+        state = self._state
+        dim = self._knowledge.world.dimension
+        current = {state.tracks[k].lineage: state.tracks[k] for k in state.best.tracks}
+        alive = {t.lineage for t in state.tracks.values()}
+        for object_id, pub in list(self._published.items()):
+            if pub.lineage not in current:
+                self._lost[object_id] = pub
+        self._lost = {
+            i: p
+            for i, p in self._lost.items()
+            if p.lineage in alive and self._ids.get(p.lineage) == i
+        }
+        for lineage in current:
+            held = self._ids.get(lineage)
+            if held is not None:
+                self._lost.pop(held, None)
+        fresh = [t for lineage, t in current.items() if lineage not in self._ids]
+        if fresh and self._lost:
+            self._hand_over(fresh, dim)
+        for track in fresh:
+            if track.lineage not in self._ids:
+                self._ids[track.lineage] = self._next_id
+                self._next_id += 1
+        self._ids = {lineage: i for lineage, i in self._ids.items() if lineage in alive}
+        published = {}
+        for lineage, track in current.items():
+            x, P = _summary_position(track, dim)
+            published[self._ids[lineage]] = _Published(lineage, track.cls, x, P)
+        self._published = published
+
+    def _hand_over(self, fresh: list[Track], dim: int) -> None:
+        lost = list(self._lost.items())
+        cost = np.full((len(fresh), len(lost)), 1e9)
+        for a, track in enumerate(fresh):
+            x, P = _summary_position(track, dim)
+            for b, (_, pub) in enumerate(lost):
+                if not self.taxonomy.compatible(track.cls, pub.cls):
+                    continue
+                delta = x - pub.position
+                d2 = float(delta @ np.linalg.solve(P + pub.covariance, delta))
+                if d2 <= _HANDOVER_GATE:
+                    cost[a, b] = d2
+        rows, cols = linear_sum_assignment(cost)
+        for a, b in zip(rows, cols, strict=True):
+            if cost[a, b] < 1e9:
+                object_id, pub = lost[b]
+                self._ids.pop(pub.lineage, None)
+                self._ids[fresh[a].lineage] = object_id
+                del self._lost[object_id]
+
+    # ------------------------------------------------------------------ queries
+    def world(
+        self,
+        time: float | None = None,
+        cls: str | None = None,
+        near: Sequence[float] | None = None,
+        label: str | None = None,
+    ) -> WorldState:
+        """The objects of the most probable hypothesis, predicted to ``time`` (s).
+
+        Parameters
+        ----------
+        cls
+            Only objects of this class or its subclasses (``Can`` covers ``CokeCan``).
+        near
+            ``(x, y, r)`` or ``(x, y, z, r)``: only objects within ``r`` metres.
+        label
+            Only objects carrying this label.
+        """
+        dim = self._knowledge.world.dimension
+        if cls is not None and cls not in self._knowledge.classes:
+            known = ", ".join(sorted(self._knowledge.classes))
+            raise ValueError(f"unknown class {cls!r}; known classes: {known}")
+        if near is not None and len(near) != dim + 1:
+            raise ValueError(f"near needs {dim} coordinates and a radius; got {len(near)} values")
+        state = self._state
+        at = time if time is not None else state.time
+        if at is None:
+            return WorldState(time=None, objects=())
+        keys = list(state.best.tracks)
+        predicted = self._mhf.predict(state, keys, at)
+        gone = self._mhf.leaving(predicted, at)
+        existence = self._existence(state)
+        covered = self.taxonomy.covers(cls) if cls is not None else None
+        objects = []
+        for i, track in enumerate(predicted.tracks):
+            if track.key in gone or (covered is not None and track.cls not in covered):
+                continue
+            if label is not None and track.label != label:
+                continue
+            position = predicted.position[i]
+            if (
+                near is not None
+                and float(np.linalg.norm(position - np.asarray(near[:dim]))) > near[dim]
+            ):
+                continue
+            objects.append(self._world_object(track, predicted, i, existence[track.lineage]))
+        objects.sort(key=lambda o: o.id)
+        return WorldState(time=at, objects=tuple(objects))
+
+    def object(self, object_id: int, time: float | None = None) -> WorldObject | None:
+        """One object of the world by its id, or ``None``."""
+        return next((o for o in self.world(time).objects if o.id == object_id), None)
+
+    def _existence(self, state: MHFState) -> dict[int, float]:
+        """Total probability of the hypotheses that hold each lineage."""
+        totals: dict[int, float] = {}
+        tracks = state.tracks
+        for h in state.hypotheses:
+            p = math.exp(h.log_weight)
+            for lineage in {tracks[k].lineage for k in h.tracks}:
+                totals[lineage] = totals.get(lineage, 0.0) + p
+        return totals
+
+    def _world_object(
+        self, track: Track, predicted: Predicted, i: int, existence: float
+    ) -> WorldObject:
+        dim = self._knowledge.world.dimension
+        mean = predicted.state_mean[i]
+        flt = self._mhf.factory.filter_for(track.cls)
+        velocity = tuple(float(v) for v in mean[dim : 2 * dim]) if mean.shape[0] > dim else None
+        modes = None
+        if flt.modes > 1:
+            names = [
+                o if list(flt.orders).count(o) == 1 else f"{o}_{j}"
+                for j, o in enumerate(flt.orders)
+            ]
+            modes = {n: float(p) for n, p in zip(names, predicted.mu[i], strict=True)}
+        object_id = self._ids.get(track.lineage)
+        if object_id is None:  # published on the next ingest; give it an id now
+            self._publish()
+            object_id = self._ids[track.lineage]
+        return WorldObject(
+            id=object_id,
+            cls=track.cls,
+            label=track.label,
+            position=tuple(float(v) for v in predicted.position[i]),
+            velocity=velocity,
+            covariance=tuple(
+                tuple(float(v) for v in row) for row in predicted.position_covariance[i]
+            ),
+            existence=min(1.0, existence),
+            last_seen=track.last_seen,
+            created=track.created,
+            mode_probabilities=modes,
+        )
+
+    def hypotheses(self, k: int = 10) -> list[HypothesisSummary]:
+        """The ``k`` most probable hypotheses with their probabilities and objects."""
+        if k < 1:
+            raise ValueError(f"k must be at least 1; got {k}")
+        state = self._state
+        dim = self._knowledge.world.dimension
+        summaries = []
+        for h in state.hypotheses[:k]:
+            objects = []
+            for key in sorted(h.tracks):
+                track = state.tracks[key]
+                x, _ = _summary_position(track, dim)
+                objects.append(
+                    HypothesisObject(
+                        id=self._ids.get(track.lineage),
+                        track=track.lineage,
+                        cls=track.cls,
+                        label=track.label,
+                        position=tuple(float(v) for v in x),
+                    )
+                )
+            summaries.append(
+                HypothesisSummary(probability=math.exp(h.log_weight), objects=tuple(objects))
+            )
+        return summaries
