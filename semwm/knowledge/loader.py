@@ -187,7 +187,9 @@ def _describe(error: ErrorDetails) -> str:
     if kind == "literal_error":
         return f"expected {context['expected']}, found {found}"
     if kind == "union_tag_invalid":
-        return f"expected {context['discriminator']} {context['expected_tags']}, found {found}"
+        expected = " or ".join(context["expected_tags"].split(", "))
+        key = context["discriminator"].strip("'")
+        return f"expected {key} {expected}, found {context['tag']!r}"
     if kind == "union_tag_not_found":
         return f"missing required value {context['discriminator']}"
     if kind == "too_short":
@@ -215,6 +217,8 @@ def validation_problems(error: ValidationError, reported: Sequence[Path] = ()) -
     problems = []
     for detail in error.errors():
         path = _field_path(detail["loc"])
+        if detail["type"] in ("union_tag_invalid", "union_tag_not_found"):
+            path = (*path, str((detail.get("ctx") or {})["discriminator"]).strip("'"))
         if _is_consequence(detail) or any(path[: len(r)] == r for r in reported):
             continue
         problems.append(Problem(_describe(detail), path))

@@ -79,6 +79,7 @@ _WORLD_FIELDS = (
     "region",
     "default_detector",
 )
+_WORLD_TEXTS = ("association_model", "default_detector")
 _CLASS_SCALARS = (
     "detection_frequency",
     "new_frequency",
@@ -291,7 +292,8 @@ class _Reader:
                 world[tag] = self.matrix(child, (*path, tag))
             else:
                 self.record((*path, tag), self.line(child))
-                world[tag] = _number_or_text(self.text(child))
+                text = self.text(child)
+                world[tag] = text if tag in _WORLD_TEXTS else _number_or_text(text)
         return world
 
     def object(self, element: etree._Element, path: Path) -> dict[str, Any]:
