@@ -71,7 +71,9 @@ def check(
     for index, det in enumerate(detections):
         found: list[DetectionProblem] = []
 
-        def problem(field: str, message: str, found: list[DetectionProblem] = found) -> None:
+        def problem(
+            field: str, message: str, found: list[DetectionProblem] = found, index: int = index
+        ) -> None:
             found.append(DetectionProblem(path=(index, field), message=message))
 
         if det.cls not in knowledge.classes:

@@ -137,4 +137,5 @@ def combine(x: FloatArray, P: FloatArray, mu: FloatArray) -> tuple[FloatArray, F
 def mahalanobis_squared(residual: FloatArray, covariance: FloatArray) -> FloatArray:
     """:math:`r^T C^{-1} r` for stacked residuals ``(..., d)`` and covariances ``(..., d, d)``."""
     solved = np.linalg.solve(covariance, residual[..., None])[..., 0]
-    return np.einsum("...i,...i->...", residual, solved)
+    result: FloatArray = np.einsum("...i,...i->...", residual, solved)
+    return result

@@ -51,7 +51,7 @@ class ClassFilter:
 
     @property
     def state_size(self) -> int:
-        return self.initial_covariance.shape[0]
+        return int(self.initial_covariance.shape[0])
 
     def initial_states(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """New objects at measured positions ``z`` ``(K, d)`` with zero velocity (paper 002 III-A)."""

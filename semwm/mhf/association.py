@@ -127,15 +127,13 @@ class Associator:
                     if (
                         known.cls in covered
                         and _distance(m.z, known.position) <= relation.max_distance
-                    ):
-                        if log_num > base_log:
-                            base_rate, base_log = relation.frequency, log_num
+                    ) and log_num > base_log:
+                        base_rate, base_log = relation.frequency, log_num
                 for i, track in enumerate(tracks):
                     if track.cls in covered and (
                         float(np.linalg.norm(m.z - predicted.position[i])) <= relation.max_distance
-                    ):
-                        if log_num > presence.get(track.key, (0.0, -math.inf))[1]:
-                            presence[track.key] = (relation.frequency, log_num)
+                    ) and log_num > presence.get(track.key, (0.0, -math.inf))[1]:
+                        presence[track.key] = (relation.frequency, log_num)
             presence = {k: v for k, v in presence.items() if v[1] > base_log}
             x, P, mu = new_states[j]
             new_track = Track(
