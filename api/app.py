@@ -15,6 +15,7 @@ from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
 from pydantic import BaseModel
 
+from api.deps import get_world
 from api.errors import install_error_handlers
 from api.routes import detections, knowledge, system, world
 from api.schemas import DetectionBatch, DetectionIn
@@ -41,7 +42,7 @@ def create_app(settings: Settings) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        if not hasattr(app.state, "world"):
+        if get_world not in app.dependency_overrides:
             if settings.knowledge is None:
                 raise RuntimeError(
                     "no knowledge file: pass --knowledge FILE or set SEMWM_KNOWLEDGE"

@@ -82,8 +82,11 @@ class IngestOut(BaseModel):
 
     model_config = ConfigDict(json_schema_extra={"examples": [{"applied": 2, "time": 12.3}]})
 
-    applied: int = Field(description="How many detections were accepted.")
+    applied: int = Field(description="How many detections were applied.")
     time: float | None = Field(description="The world time after them (s).")
+    ignored: int = Field(
+        default=0, description="Accepted but not used: beyond their detector's range."
+    )
 
 
 class WorldObjectOut(BaseModel):

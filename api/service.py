@@ -18,7 +18,7 @@ from api.errors import ConflictError, InvalidError, KnowledgeFileError, Loc, Not
 from semwm.detection import DetectionError, DetectionProblem, OutOfOrderError
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
 from semwm.knowledge.loader import load_knowledge
-from semwm.world import WorldModel
+from semwm.world import IngestResult, WorldModel
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 
 
@@ -82,7 +82,7 @@ class WorldService:
 
     # -- detections ---------------------------------------------------------------------------
 
-    def ingest(self, detections: Sequence[dict[str, Any]], batch: bool) -> tuple[int, float | None]:
+    def ingest(self, detections: Sequence[dict[str, Any]], batch: bool) -> IngestResult:
         """Apply ``detections`` whole, or raise :class:`InvalidError`/:class:`ConflictError`."""
         with self._lock:
             try:
@@ -91,7 +91,7 @@ class WorldService:
                 raise InvalidError(problems_to_items(error.problems, batch)) from error
             except OutOfOrderError as error:
                 raise ConflictError(f"{error}; nothing was applied") from error
-            return result.applied, result.time
+            return result
 
     def domain_problems(
         self, detections: Sequence[dict[str, Any]], index: Sequence[int], batch: bool

@@ -116,8 +116,8 @@ def post_detections(
         # Report the domain problems of the others too, so one answer lists them all.
         more = world.domain_problems(items, parsed.index, parsed.batch)
         raise InvalidError(sorted(parsed.errors + more, key=_loc_order))
-    applied, time = world.ingest(items, parsed.batch)
-    return IngestOut(applied=applied, time=time)
+    result = world.ingest(items, parsed.batch)
+    return IngestOut(applied=result.applied, time=result.time, ignored=result.ignored)
 
 
 def _loc_order(item: dict[str, Any]) -> tuple[int, str]:
