@@ -43,7 +43,10 @@ def imm_mix(
     if x.shape[1] == 1:
         return x, P, mu
     cbar = mu @ T  # (N, M)
-    omega = T[None, :, :] * mu[:, :, None] / cbar[:, None, :]  # (N, i, j)
+    reachable = cbar > 0.0
+    omega = T[None, :, :] * mu[:, :, None] / np.where(reachable, cbar, 1.0)[:, None, :]
+    # a mode nobody can reach starts from the mixture (its probability is 0 anyway)
+    omega = np.where(reachable[:, None, :], omega, mu[:, :, None])  # (N, i, j)
     x0 = np.einsum("nij,nik->njk", omega, x)
     spread = x[:, :, None, :] - x0[:, None, :, :]  # (N, i, j, n)
     P0 = np.einsum("nij,nikl->njkl", omega, P) + np.einsum(
