@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from semwm.knowledge import ClassSpec, ResolvedClass
 
@@ -52,6 +52,16 @@ class DetectionIn(Body):
     sensor_position: Vector | None = Field(
         default=None, description="Where the sensor was (m), for detector ranges."
     )
+
+    @field_validator("covariance")
+    @classmethod
+    def _square(cls, value: list[list[float]] | None) -> list[list[float]] | None:
+        if value is not None and any(len(row) != len(value) for row in value):
+            lengths = ", ".join(str(len(row)) for row in value)
+            raise ValueError(
+                f"covariance must be a square matrix; found {len(value)} rows of lengths {lengths}"
+            )
+        return value
 
     def to_domain(self) -> dict[str, Any]:
         """The detection as :meth:`semwm.WorldModel.ingest` takes it."""

@@ -82,6 +82,7 @@ BAD_JSON: list[tuple[str, Any, list[list[str | int]]]] = [
     ("unknown-class", with_(**{"class": "Mug"}), [["body", "class"]]),
     ("empty-class", with_(**{"class": ""}), [["body", "class"]]),
     ("unknown-detector", with_(detector="radar"), [["body", "detector"]]),
+    ("covariance-ragged", with_(covariance=[[1.0, 0.0], [0.0]]), [["body", "covariance"]]),
     ("covariance-wrong-shape", with_(covariance=[[1.0, 0.0]]), [["body", "covariance"]]),
     (
         "covariance-3x3",
