@@ -1,0 +1,60 @@
+"""Comparing the real world model's hypotheses with the reference's."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from semwm.world import WorldModel
+from .reference import ReferenceMHF
+
+Hyp = tuple[float, list[tuple[int, str, str | None, tuple[float, ...]]]]
+
+
+def real_hypotheses(wm: WorldModel) -> list[Hyp]:
+    return [
+        (h.probability, sorted((o.track, o.cls, o.label, o.position) for o in h.objects))
+        for h in wm.hypotheses(10**9)
+    ]
+
+
+def ref_hypotheses(ref: ReferenceMHF) -> list[Hyp]:
+    return [
+        (h.p, sorted((o.lineage, o.cls, o.label, tuple(float(v) for v in o.x)) for o in h.objects))
+        for h in ref.hypotheses
+    ]
+
+
+def _same_objects(a: Hyp, b: Hyp, tol: float) -> bool:
+    if len(a[1]) != len(b[1]):
+        return False
+    for (la, ca, lba, xa), (lb, cb, lbb, xb) in zip(a[1], b[1], strict=True):
+        if (la, ca, lba) != (lb, cb, lbb) or not np.allclose(xa, xb, rtol=0, atol=tol):
+            return False
+    return True
+
+
+def assert_same_hypotheses(real: Sequence[Hyp], ref: Sequence[Hyp], tol: float = 1e-9) -> None:
+    """The two are the same multiset of (probability, objects), to ``tol``."""
+    assert math.isclose(sum(p for p, _ in real), 1.0, abs_tol=1e-9)
+    left = list(ref)
+    for hyp in real:
+        match = next(
+            (i for i, r in enumerate(left) if abs(r[0] - hyp[0]) <= tol and _same_objects(hyp, r, tol)),
+            None,
+        )
+        assert match is not None, (
+            f"real hypothesis {hyp} not in the reference;\nreference: {sorted(left, key=lambda h: -h[0])}"
+        )
+        del left[match]
+    assert not left, f"reference hypotheses missing from the real MHF: {left}"
+
+
+def map_objects(hyps: Sequence[Hyp]) -> list | None:
+    """Objects (lineage, class) of the most probable hypothesis; None if it is a tie."""
+    ranked = sorted(hyps, key=lambda h: -h[0])
+    if len(ranked) > 1 and ranked[0][0] - ranked[1][0] < 1e-9:
+        return None
+    return [(lin, cls) for lin, cls, _, _ in ranked[0][1]]

@@ -1,0 +1,249 @@
+"""A brute-force reference MHF, written plainly from paper 002 Section III and eqs. (1)-(8).
+
+No sharing, no gating, no batching, no log space: every hypothesis is a plain list
+of objects, each object carries its own Kalman filter (a zeroth-order, constant
+position model: x- = x, P- = P + dt Qc), and every detection expands every
+hypothesis into
+
+* clutter,
+* a new object at the detection (P = P0 of the detection's class),
+* each existing object whose class is compatible with the detection's (taxonomy)
+  and that has not taken a detection of the current scan yet (an object takes at
+  most one detection per scan; an object created in this scan has taken one).
+
+Probabilities (model ``paper``), for a parent ``h`` and
+``F = f_clutter + f_new(h) + sum_{o in h} f_existing(C(o))``:
+
+* clutter ``f_clutter / F``,
+* new ``f_new(h) / F`` with ``f_new(h)`` = max of the class base rate and every
+  appearance relation of the detection's class whose target (a known map object, or
+  an object of ``h`` that existed before the scan, at its predicted position) lies
+  within ``max_distance`` (eq. 4),
+* existing ``o``: ``f_existing(C(o)) / F * exp(-1/2 d^T R^-1 d)``, ``d = z - x+``.
+
+Model ``mht``: no per-parent ``F``; clutter ``f_clutter / V``, new ``f_new / V`` (or
+``f_presence / (pi r^2)`` for a relation of radius r, whichever is larger), existing
+``f_existing * N(z; x-, P- + R)``.
+
+Then Bayes (eq. 1): children normalised over all parents; pruned by ratio alpha
+(eq. 3) after each detection. Objects whose largest position variance exceeds
+P_max, or unseen longer than the class's maximum, are removed at each scan's time
+(before its detections); hypotheses that became identical are merged.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from semwm.knowledge.model import Knowledge
+
+
+@dataclass(frozen=True)
+class RefDetection:
+    seq: int
+    time: float
+    cls: str
+    z: np.ndarray
+    label: str | None = None
+    source: str | None = None
+
+
+@dataclass(frozen=True)
+class RefObject:
+    lineage: int
+    history: tuple[int, ...]  # seqs of the detections this object took
+    cls: str
+    label: str | None
+    x: np.ndarray
+    P: np.ndarray
+    time: float
+    last_seen: float
+
+    @property
+    def identity(self) -> tuple[int, tuple[int, ...], str | None]:
+        return (self.lineage, self.history, self.label)
+
+
+@dataclass
+class RefHypothesis:
+    p: float
+    objects: list[RefObject] = field(default_factory=list)
+
+
+class ReferenceMHF:
+    def __init__(self, knowledge: Knowledge) -> None:
+        self.k = knowledge
+        self.model = knowledge.world.association_model
+        self.ratio = knowledge.world.pruning_ratio
+        self.detector = knowledge.detectors[knowledge.default_detector]
+        self.hypotheses = [RefHypothesis(1.0, [])]
+        region = knowledge.world.region
+        self.volume = math.prod(hi - lo for lo, hi in region) if region else 1.0
+
+    # -------------------------------------------------------------- knowledge
+    def ancestors(self, cls: str) -> set[str]:
+        out: set[str] = set()
+        todo = list(self.k.classes[cls].parents)
+        while todo:
+            c = todo.pop()
+            if c not in out:
+                out.add(c)
+                todo.extend(self.k.classes[c].parents)
+        return out
+
+    def is_a(self, a: str, b: str) -> bool:
+        return a == b or b in self.ancestors(a)
+
+    def compatible(self, a: str, b: str) -> bool:
+        return self.is_a(a, b) or self.is_a(b, a)
+
+    def R(self, cls: str) -> np.ndarray:
+        noise = self.detector.measurement_noise
+        for name in (cls, *self.k.classes[cls].ancestors):
+            if name in noise:
+                return np.array(noise[name], dtype=float)
+        return np.array(self.k.classes[cls].measurement_noise, dtype=float)
+
+    def Qc(self, cls: str) -> np.ndarray:
+        return np.array(self.k.classes[cls].filter.model.system_noise, dtype=float)  # type: ignore[union-attr]
+
+    def f_existing(self, cls: str) -> float:
+        return self.k.classes[cls].detection_frequency
+
+    # -------------------------------------------------------------- pieces
+    def predict(self, o: RefObject, t: float) -> RefObject:
+        dt = t - o.time
+        if dt <= 0:
+            return o
+        return replace(o, P=o.P + dt * self.Qc(o.cls), time=t)
+
+    def leaving(self, o: RefObject, t: float) -> bool:
+        spec = self.k.classes[o.cls]
+        if spec.max_position_variance is not None:
+            if np.linalg.eigvalsh(o.P).max() > spec.max_position_variance:
+                return True
+        if spec.max_time_without_update is not None:
+            if t - o.last_seen > spec.max_time_without_update:
+                return True
+        return False
+
+    def birth(self, z: RefDetection, before: Sequence[RefObject]) -> float:
+        """f_new (eq. 4), times the spatial density for mht."""
+        spec = self.k.classes[z.cls]
+        best = spec.new_frequency / (self.volume if self.model == "mht" else 1.0)
+        for rel in spec.appearance:
+            value = rel.frequency / (math.pi * rel.max_distance**2 if self.model == "mht" else 1.0)
+            targets = [np.array(k.position, float) for k in self.k.known_objects if self.is_a(k.cls, rel.target)]
+            targets += [o.x for o in before if self.is_a(o.cls, rel.target)]
+            if any(np.linalg.norm(z.z - pos) <= rel.max_distance for pos in targets):
+                best = max(best, value)
+        return best
+
+    @staticmethod
+    def relabel(objects: list[RefObject], holder: int, label: str | None) -> list[RefObject]:
+        """Paper 000 III-B: the other objects carrying the holder's label give it up."""
+        if label is None:
+            return objects
+        return [
+            replace(o, label=None) if i != holder and o.label == label else o
+            for i, o in enumerate(objects)
+        ]
+
+    # -------------------------------------------------------------- the filter
+    def process_scan(self, scan: Sequence[RefDetection]) -> None:
+        t = scan[0].time
+        merged: dict[frozenset, RefHypothesis] = {}
+        for h in self.hypotheses:
+            objects = [self.predict(o, t) for o in h.objects]
+            objects = [o for o in objects if not self.leaving(o, t)]
+            key = frozenset(o.identity for o in objects)
+            if key in merged:
+                merged[key].p += h.p
+            else:
+                merged[key] = RefHypothesis(h.p, objects)
+        # each hypothesis: (p, objects, lineages that already took a detection of this scan)
+        current = [(h.p, h.objects, set(), list(h.objects)) for h in merged.values()]
+        total = sum(c[0] for c in current)
+        current = [(p / total, objs, taken, before) for p, objs, taken, before in current]
+        for z in scan:
+            R = self.R(z.cls)
+            Rinv = np.linalg.inv(R)
+            children = []
+            for p, objs, taken, before in current:
+                f_c = self.detector.clutter_frequency
+                f_new = self.birth(z, before)
+                if self.model == "paper":
+                    F = f_c + f_new + sum(self.f_existing(o.cls) for o in objs)
+                    w_clutter, w_new = f_c / F, f_new / F
+                else:
+                    F = 1.0
+                    w_clutter = f_c / self.volume
+                    w_new = f_new
+                if w_clutter > 0:
+                    children.append((p * w_clutter, objs, taken, before))
+                if w_new > 0:
+                    new = RefObject(
+                        z.seq,
+                        (z.seq,),
+                        z.cls,
+                        z.label,
+                        z.z.copy(),
+                        np.array(self.k.classes[z.cls].initial_covariance, float),
+                        t,
+                        t,
+                    )
+                    kids = self.relabel([*objs, new], len(objs), z.label)
+                    children.append((p * w_new, kids, taken | {z.seq}, before))
+                for i, o in enumerate(objs):
+                    if o.lineage in taken or not self.compatible(o.cls, z.cls):
+                        continue
+                    S = o.P + R
+                    K = o.P @ np.linalg.inv(S)
+                    x_post = o.x + K @ (z.z - o.x)
+                    I = np.eye(len(o.x))
+                    P_post = (I - K) @ o.P @ (I - K).T + K @ R @ K.T
+                    if self.model == "paper":
+                        delta = z.z - x_post
+                        lik = math.exp(-0.5 * float(delta @ Rinv @ delta))
+                        w = self.f_existing(o.cls) / F * lik
+                    else:
+                        y = z.z - o.x
+                        dens = math.exp(-0.5 * float(y @ np.linalg.inv(S) @ y)) / math.sqrt(
+                            (2 * math.pi) ** len(y) * np.linalg.det(S)
+                        )
+                        w = self.f_existing(o.cls) * dens
+                    refined = o.cls if self.is_a(o.cls, z.cls) else z.cls
+                    updated = RefObject(
+                        o.lineage,
+                        (*o.history, z.seq),
+                        refined,
+                        z.label if z.label is not None else o.label,
+                        x_post,
+                        P_post,
+                        t,
+                        t,
+                    )
+                    kids = list(objs)
+                    kids[i] = updated
+                    kids = self.relabel(kids, i, z.label)
+                    children.append((p * w, kids, taken | {o.lineage}, before))
+            total = sum(c[0] for c in children)
+            children = [(c[0] / total, *c[1:]) for c in children]
+            if self.ratio > 0:
+                best = max(c[0] for c in children)
+                children = [c for c in children if c[0] >= self.ratio * best]
+                total = sum(c[0] for c in children)
+                children = [(c[0] / total, *c[1:]) for c in children]
+            current = children
+        self.hypotheses = [RefHypothesis(p, objs) for p, objs, _, _ in current]
+
+
+def run_reference(knowledge: Knowledge, scans: Sequence[Sequence[RefDetection]]) -> ReferenceMHF:
+    ref = ReferenceMHF(knowledge)
+    for scan in scans:
+        ref.process_scan(scan)
+    return ref
