@@ -140,8 +140,8 @@ def test_an_empty_appearance_stays_empty_rather_than_inherited() -> None:
         classes=(spec,), detectors=(DetectorSpec(name="d", clutter_frequency=0.0),)
     )
     for fmt in ("xml", "yaml"):
-        [read] = analyse_text(document_to_text(document, fmt), fmt).document.classes  # type: ignore[union-attr, arg-type]
-        assert read.appearance == ()
+        read = analyse_text(document_to_text(document, fmt), fmt).document
+        assert read is not None and read.classes[0].appearance == ()
 
 
 @pytest.mark.parametrize("source", ["sim2.xml", "robocup.yaml"])
