@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 from api.cli import add_serve_command
 from semwm.cli_knowledge import add_knowledge_commands
+from semwm.sim.cli import add_simulate_command
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -14,6 +15,7 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     add_knowledge_commands(subparsers)
     add_serve_command(subparsers)
+    add_simulate_command(subparsers)
     return parser
 
 
