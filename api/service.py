@@ -15,10 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from api.errors import ConflictError, InvalidError, KnowledgeFileError, Loc, NotFoundError
+from semwm import IngestResult, WorldModel, load_knowledge
 from semwm.detection import DetectionError, DetectionProblem, OutOfOrderError
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
-from semwm.knowledge.loader import load_knowledge
-from semwm.world import IngestResult, WorldModel
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 
 
