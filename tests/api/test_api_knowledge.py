@@ -174,3 +174,21 @@ def test_write_back_writes_accepted_edits_only(knowledge_file: Path) -> None:
         assert knowledge_file.read_text() == text
         assert client.post("/knowledge/reload").status_code == 200
         assert client.get("/knowledge/classes/Mug").status_code == 200
+
+
+def test_changing_the_filter_of_tracked_classes_gives_no_5xx(seeded: TestClient) -> None:
+    imm = seeded.get("/knowledge/classes/Robot").json()["spec"]
+    kalman = seeded.get("/knowledge/classes/Can").json()["spec"]
+    assert seeded.put("/knowledge/classes/Cup", json={**imm, "name": "Cup"}).status_code == 200
+    assert (
+        seeded.put("/knowledge/classes/Robot", json={**kalman, "name": "Robot"}).status_code == 200
+    )
+    assert seeded.get("/world").status_code == 200
+    detections = [
+        {"time": 3.0, "class": "Cup", "position": [1.0, 2.0], "source": "r1"},
+        {"time": 3.0, "class": "Robot", "position": [0.6, 0.0], "label": "r1", "source": "r1"},
+    ]
+    assert seeded.post("/detections", json={"detections": detections}).status_code == 200
+    classes = {o["class"]: o for o in seeded.get("/world").json()["objects"]}
+    assert classes["Cup"]["mode_probabilities"] is not None  # now an IMM class
+    assert seeded.get("/hypotheses").status_code == 200
