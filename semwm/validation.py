@@ -42,7 +42,10 @@ def parse(batch: list[DetectionInput]) -> list[Detection]:
     return parsed
 
 
-def _square_problem(matrix: object, d: int, what: str) -> str | None:
+def _square_problem(matrix: tuple[tuple[float, ...], ...], d: int, what: str) -> str | None:
+    if len(matrix) != d or any(len(row) != d for row in matrix):
+        lengths = ", ".join(str(len(row)) for row in matrix)
+        return f"{what} must be {d} x {d}; found {len(matrix)} rows of lengths {lengths or 'none'}"
     array = np.asarray(matrix, dtype=float)
     if array.shape != (d, d):
         return f"{what} must be {d} x {d}; found shape {array.shape}"

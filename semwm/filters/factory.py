@@ -54,7 +54,7 @@ class ClassFilter:
         return int(self.initial_covariance.shape[0])
 
     def initial_states(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """New objects at measured positions ``z`` ``(K, d)`` with zero velocity (paper 002 III-A)."""
+        """New objects at measured positions ``z`` ``(K, d)``, zero velocity (paper 002 III-A)."""
         K = z.shape[0]
         x = np.zeros((K, self.modes, self.state_size))
         x[:, :, : self.dim] = z[:, None, :]

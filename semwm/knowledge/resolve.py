@@ -86,7 +86,8 @@ def _transition_problems(spec: IMMFilterSpec, path: Path) -> list[Problem]:
         elif abs(sum(row) - 1.0) > 1e-9:
             problems.append(
                 Problem(
-                    f"transition matrix row {i + 1} must sum to 1 (row i holds P(mode j | mode i)); "
+                    f"transition matrix row {i + 1} must sum to 1 "
+                    "(row i holds P(mode j | mode i)); "
                     f"it sums to {sum(row):g}",
                     where,
                 )
@@ -204,7 +205,8 @@ def _resolve(
             if parent not in index:
                 problems.append(
                     Problem(
-                        f"class {spec.name!r} is-a unknown class {parent!r}; known classes: {known_classes}",
+                        f"class {spec.name!r} is-a unknown class {parent!r}; "
+                        f"known classes: {known_classes}",
                         ("classes", i, "is_a", j),
                     )
                 )
@@ -218,6 +220,8 @@ def _resolve(
         )
     if cycles:
         parents = {name: () if name in cycles else p for name, p in parents.items()}
+    # classes whose chain is broken already have a problem; don't add its consequences
+    broken = {s.name for s in specs if len(parents[s.name]) != len(s.is_a)} | cycles
 
     for i, spec in enumerate(specs):
         problems += _class_spec_problems(spec, dim, ("classes", i))
@@ -240,7 +244,8 @@ def _resolve(
                 (getattr(s, field) for s in chain if getattr(s, field) is not None), None
             )
         missing = [f for f in _REQUIRED if values[f] is None]
-        for field in missing:
+        reported = missing and not broken & {s.name for s in chain}
+        for field in missing if reported else ():
             lineage = " -> ".join(s.name for s in chain)
             problems.append(
                 Problem(

@@ -66,7 +66,9 @@ class Taxonomy:
     def _class_likelihood(self, object_class: str, detection_class: str) -> float:
         """L_class(C(o), C(z)) of paper 002 eq. (8).
 
-        .. math:: L_{class} = 1 \\text{ if } C(o) \\text{ and } C(z) \\text{ are compatible, else } 0
+        .. math::
+           L_{class} = 1 \\text{ if } C(o) \\text{ and } C(z)
+           \\text{ are compatible, else } 0
 
         Kept behind this one function so that a softer confusion model (visual
         similarity, paper 002 IV-A.5) can replace it.
