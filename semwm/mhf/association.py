@@ -130,9 +130,14 @@ class Associator:
                     ) and log_num > base_log:
                         base_rate, base_log = relation.frequency, log_num
                 for i, track in enumerate(tracks):
-                    if track.cls in covered and (
-                        float(np.linalg.norm(m.z - predicted.position[i])) <= relation.max_distance
-                    ) and log_num > presence.get(track.key, (0.0, -math.inf))[1]:
+                    if (
+                        track.cls in covered
+                        and (
+                            float(np.linalg.norm(m.z - predicted.position[i]))
+                            <= relation.max_distance
+                        )
+                        and log_num > presence.get(track.key, (0.0, -math.inf))[1]
+                    ):
                         presence[track.key] = (relation.frequency, log_num)
             presence = {k: v for k, v in presence.items() if v[1] > base_log}
             x, P, mu = new_states[j]
