@@ -112,16 +112,7 @@ def test_sim1_metrics_class_accuracy_is_exact_once_resolved(model: str) -> None:
     "model",
     [
         pytest.param("paper", marks=xfail_paper),
-        pytest.param(
-            "mht",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="mht, seed 0: the person's track is removed during each 1.5 s occlusion "
-                "(Person max_position_variance 1.0 m^2 is passed after ~1.3 s with the "
-                "first-order noise 0.5 m^2/s^3) and re-created: ids 1 -> 2 at B, 2 -> 4 at D, "
-                "2 ID switches",
-            ),
-        ),
+        "mht",
     ],
 )
 def test_sim2_person_keeps_one_id_through_both_occlusions(model: str) -> None:
