@@ -159,6 +159,8 @@ class StoneSoupTracker:
     """Stone Soup GNN or JPDA, fed one scan at a time (``mode``: ``gnn``/``jpda``)."""
 
     def __init__(self, tuning: Tuning, mode: str = "gnn", *, time_limit: float = 120.0) -> None:
+        import time as clock
+
         from stonesoup.dataassociator.neighbour import GlobalNearestNeighbour
         from stonesoup.dataassociator.probability import JPDA
         from stonesoup.deleter.error import CovarianceBasedDeleter
@@ -176,8 +178,6 @@ class StoneSoupTracker:
         from stonesoup.predictor.kalman import KalmanPredictor
         from stonesoup.types.state import GaussianState
         from stonesoup.updater.kalman import KalmanUpdater
-
-        import time as clock
 
         self._clock = clock.perf_counter
         self._start = self._clock()
@@ -213,9 +213,7 @@ class StoneSoupTracker:
         thresh = 2.0 * tuning.max_position_variance
         deleters: list[Any] = [CovarianceBasedDeleter(covar_trace_thresh=thresh, mapping=[0, 2])]
         if tuning.max_time_without_update:
-            deleters.append(
-                UpdateTimeDeleter(dt.timedelta(seconds=tuning.max_time_without_update))
-            )
+            deleters.append(UpdateTimeDeleter(dt.timedelta(seconds=tuning.max_time_without_update)))
         self.deleter = (
             CompositeDeleter(deleters, intersect=False) if len(deleters) > 1 else deleters[0]
         )
@@ -333,7 +331,7 @@ class StoneSoupTracker:
 
 
 class _NNTrack:
-    __slots__ = ("kf", "id", "cls", "hits", "last", "created", "time")
+    __slots__ = ("cls", "created", "hits", "id", "kf", "last", "time")
 
     def __init__(self, kf: Any, oid: int, cls: str, t: float) -> None:
         self.kf, self.id, self.cls = kf, oid, cls
@@ -436,7 +434,10 @@ def _version(name: str) -> str | None:
 def _commit() -> str | None:
     try:
         out = subprocess.run(
-            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True,
+            ["git", "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
             cwd=Path(__file__).resolve().parent,
         )
         return out.stdout.strip()
@@ -450,9 +451,7 @@ def machine_info() -> dict[str, Any]:
         "processor": platform.processor() or platform.machine(),
         "cpu_count": os.cpu_count(),
         "python": platform.python_version(),
-        "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         "commit": _commit(),
-        "versions": {
-            n: _version(n) for n in ("semwm", "stonesoup", "filterpy", "numpy", "scipy")
-        },
+        "versions": {n: _version(n) for n in ("semwm", "stonesoup", "filterpy", "numpy", "scipy")},
     }

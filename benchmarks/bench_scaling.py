@@ -36,14 +36,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baselines import machine_info  # noqa: E402
+from baselines import machine_info
 
-from semwm.knowledge.loader import load_knowledge  # noqa: E402
-from semwm.knowledge.model import Knowledge  # noqa: E402
-from semwm.knowledge.shipped import shipped_knowledge_path  # noqa: E402
-from semwm.sim.runner import run_scenario, scans  # noqa: E402
-from semwm.sim.scenarios import make_scenario  # noqa: E402
-from semwm.world import WorldModel  # noqa: E402
+from semwm.knowledge.loader import load_knowledge
+from semwm.knowledge.model import Knowledge
+from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.sim.runner import run_scenario, scans
+from semwm.sim.scenarios import make_scenario
+from semwm.world import WorldModel
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SIZES = (10, 30, 50, 100, 200, 500)
@@ -161,8 +161,11 @@ def run(quick: bool = False, size_limit: float = 60.0) -> dict[str, Any]:
         doc["grid"]["sizes"].append(row)
         brief = {k: v for k, v in row.items() if k != "per_frame"}
         print(f"grid N={n}: {brief}", flush=True)
-    steady = [(r["n"], r["steady_cpu_ms_per_frame"]) for r in doc["grid"]["sizes"]
-              if r["steady_cpu_ms_per_frame"] is not None]
+    steady = [
+        (r["n"], r["steady_cpu_ms_per_frame"])
+        for r in doc["grid"]["sizes"]
+        if r["steady_cpu_ms_per_frame"] is not None
+    ]
     if len(steady) >= 2:
         ns, ts = np.log([s[0] for s in steady]), np.log([max(s[1], 1e-9) for s in steady])
         doc["grid"]["loglog_slope"] = float(np.polyfit(ns, ts, 1)[0])
@@ -213,8 +216,10 @@ def markdown(doc: dict[str, Any]) -> str:
             f"{_fmt(r['peak_traced_mb_steady_frames'])} | {_fmt(r['ru_maxrss_mb_after'])} |"
         )
     if "loglog_slope" in g:
-        lines += ["", f"Log-log slope of steady CPU/frame vs N: {g['loglog_slope']:.2f} "
-                  "(1 = linear)."]
+        lines += [
+            "",
+            f"Log-log slope of steady CPU/frame vs N: {g['loglog_slope']:.2f} (1 = linear).",
+        ]
     b = doc["budget"]
     lines += [
         "",

@@ -24,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baselines import (  # noqa: E402
+from baselines import (
     FilterPyNN,
     StoneSoupTracker,
     TrackerTimeout,
@@ -32,10 +32,10 @@ from baselines import (  # noqa: E402
     tuning_from_knowledge,
 )
 
-from semwm.knowledge.loader import load_knowledge  # noqa: E402
-from semwm.knowledge.shipped import shipped_knowledge_path  # noqa: E402
-from semwm.sim.runner import run_scenario  # noqa: E402
-from semwm.sim.scenarios import make_scenario  # noqa: E402
+from semwm.knowledge.loader import load_knowledge
+from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.sim.runner import run_scenario
+from semwm.sim.scenarios import make_scenario
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TRACKERS = ("semwm", "stonesoup_gnn", "stonesoup_jpda", "filterpy_nn")
@@ -68,8 +68,9 @@ def _factory(name: str, tuning: Any, time_limit: float) -> Callable[[Any], Any] 
     raise ValueError(name)
 
 
-def run_one(scenario: Any, knowledge: Any, tracker: str, tuning: Any, *, memory: bool,
-            time_limit: float) -> dict[str, Any]:
+def run_one(
+    scenario: Any, knowledge: Any, tracker: str, tuning: Any, *, memory: bool, time_limit: float
+) -> dict[str, Any]:
     factory = _factory(tracker, tuning, time_limit)
     if memory:
         tracemalloc.start()
@@ -106,8 +107,12 @@ def _mean(rows: list[dict[str, Any]], key: str) -> float | None:
     return float(np.mean(vals)) if vals else None
 
 
-def run(quick: bool = False, seeds: tuple[int, ...] = (0, 1, 2), time_limit: float = 120.0,
-        trackers: tuple[str, ...] = TRACKERS) -> dict[str, Any]:
+def run(
+    quick: bool = False,
+    seeds: tuple[int, ...] = (0, 1, 2),
+    time_limit: float = 120.0,
+    trackers: tuple[str, ...] = TRACKERS,
+) -> dict[str, Any]:
     config = QUICK if quick else FULL
     doc: dict[str, Any] = {
         "benchmark": "trackers",
@@ -142,13 +147,15 @@ def run(quick: bool = False, seeds: tuple[int, ...] = (0, 1, 2), time_limit: flo
             rows = []
             for seed in seeds:
                 scenario = make_scenario(name, seed, **sizes)
-                row = run_one(scenario, knowledge, tracker, tuning, memory=False,
-                              time_limit=time_limit)
+                row = run_one(
+                    scenario, knowledge, tracker, tuning, memory=False, time_limit=time_limit
+                )
                 row["seed"] = seed
                 rows.append(row)
                 print(f"{name:8s} {tracker:15s} seed {seed}: {row}", flush=True)
-            mem = run_one(scenario0, knowledge, tracker, tuning, memory=True,
-                          time_limit=time_limit * 2)
+            mem = run_one(
+                scenario0, knowledge, tracker, tuning, memory=True, time_limit=time_limit * 2
+            )
             entry["runs"][tracker] = rows
             entry["summary"][tracker] = {
                 "gospa": _mean(rows, "gospa"),
@@ -238,8 +245,12 @@ def markdown(doc: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--time-limit", type=float, default=120.0,
-                        help="per peer run, wall seconds, before 'timeout'")
+    parser.add_argument(
+        "--time-limit",
+        type=float,
+        default=120.0,
+        help="per peer run, wall seconds, before 'timeout'",
+    )
     args = parser.parse_args(argv)
     doc = run(quick=args.quick, time_limit=args.time_limit)
     RESULTS.mkdir(exist_ok=True)

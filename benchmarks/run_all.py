@@ -13,8 +13,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import bench_scaling  # noqa: E402
-import bench_trackers  # noqa: E402
+import bench_scaling
+import bench_trackers
 
 
 def main(argv: list[str] | None = None) -> None:
