@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from semwm.world import WorldModel
+
 from .reference import ReferenceMHF
 
 Hyp = tuple[float, list[tuple[int, str, str | None, tuple[float, ...]]]]

@@ -8,8 +8,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from semwm.knowledge.model import AppearanceRelation, KnownObject
 from semwm.world import WorldModel
+
 from .compare import assert_same_hypotheses, map_objects, real_hypotheses, ref_hypotheses
 from .kb import knowledge, static_class
 from .reference import RefDetection, run_reference
