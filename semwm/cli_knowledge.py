@@ -23,6 +23,7 @@ from semwm.knowledge.loader import (
 )
 from semwm.knowledge.model import IMMFilterSpec, Knowledge, Matrix, ResolvedClass
 from semwm.knowledge.problems import KnowledgeError
+from semwm.knowledge.resolve import INHERITED_FIELDS
 
 EXIT_OK = 0
 EXIT_INVALID = 1
@@ -129,18 +130,7 @@ _UNITS = {
     "max_position_variance": "m^2",
     "max_time_without_update": "s",
 }
-_SHOWN = (
-    "category",
-    "detection_frequency",
-    "new_frequency",
-    "appearance",
-    "filter",
-    "measurement_noise",
-    "initial_covariance",
-    "initial_velocity_covariance",
-    "max_position_variance",
-    "max_time_without_update",
-)
+_SHOWN = INHERITED_FIELDS
 
 
 def _origin(knowledge: Knowledge, resolved: ResolvedClass, field: str) -> str:

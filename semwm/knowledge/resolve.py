@@ -24,7 +24,7 @@ from semwm.knowledge.model import (
 )
 from semwm.knowledge.problems import KnowledgeError, Path, Problem
 
-_INHERITED = (
+INHERITED_FIELDS = (  # what a class takes from its is-a parents when it leaves it out
     "detection_frequency",
     "new_frequency",
     "appearance",
@@ -239,7 +239,7 @@ def _resolve(
     for i, spec in enumerate(specs):
         chain = [spec] + [specs[index[a]] for a in _ancestry(spec.name, parents)]
         values = {}
-        for field in _INHERITED:
+        for field in INHERITED_FIELDS:
             values[field] = next(
                 (getattr(s, field) for s in chain if getattr(s, field) is not None), None
             )
