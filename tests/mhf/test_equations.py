@@ -285,3 +285,21 @@ def test_person_near_door_updated_in_the_same_scan() -> None:
     assert with_person[1][:2] == (2, "Person")
     # children of one parent: new / clutter = f_new / f_clutter, f_new = f_presence (eq. 4)
     assert got[with_person] / got[door] == pytest.approx(F_PRES / FC, rel=1e-9)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="BUG: F of eqs. (5)-(7) counts f_existing of an object created (or updated) earlier "
+    "in the same scan, though it cannot take this detection (one detection per object per scan)",
+)
+def test_scan_normaliser_counts_only_objects_open_to_the_detection() -> None:
+    """One scan, two detections far apart, empty world. The object the first creates cannot
+    take the second, so for the second F = f_clutter + f_new, as for the first: the four
+    hypotheses factorise into (new or clutter) x (new or clutter)."""
+    wm = _cup_world()
+    wm.ingest([det(0.0, "Cup", 1.0, 1.0), det(0.0, "Cup", 8.0, 3.0)])
+    pn, pc = FN / (FC + FN), FC / (FC + FN)
+    o1, o2 = _obj(0, "Cup", (1.0, 1.0)), _obj(1, "Cup", (8.0, 3.0))
+    assert _hyps(wm) == pytest.approx(
+        {(o1, o2): pn * pn, (o1,): pn * pc, (o2,): pc * pn, (): pc * pc}, abs=1e-12
+    )
