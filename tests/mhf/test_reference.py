@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from semwm.knowledge.model import AppearanceRelation, KnownObject
 from semwm.world import WorldModel
 
 from .compare import assert_same_hypotheses, map_objects, real_hypotheses, ref_hypotheses
@@ -108,3 +109,48 @@ def test_same_hypotheses_as_reference(seed: int, model: str) -> None:
             (True, c) for _, c in best
         )
         assert map_objects(real) == best
+
+
+def _door_scenario(seed: int, model: str):
+    """Doors and Persons (Person appears near a Door, eq. 4), a known map door, labels;
+    one detection per scan."""
+    rng = np.random.default_rng(1000 + seed)
+    relation = AppearanceRelation(
+        target="Door", max_distance=float(rng.uniform(0.5, 1.5)), frequency=float(rng.uniform(0.5, 3.0))
+    )
+    classes = [
+        static_class("Door", f_existing=float(rng.uniform(0.2, 1.0)), f_new=0.1, r=0.05, p0=0.05, qc=0.001),
+        static_class(
+            "Person", f_existing=float(rng.uniform(0.5, 2.0)), f_new=0.2, r=0.1, p0=0.1, qc=0.1,
+            appearance=[relation],
+        ),
+    ]
+    known = [KnownObject(cls="Door", position=(4.0, 4.0))] if rng.random() < 0.5 else []
+    kb = knowledge(
+        classes, f_clutter=float(rng.uniform(0.1, 0.6)), model=model,
+        region=REGION if model == "mht" else None, known=known,
+    )
+    scans, t = [], 0.0
+    for seq in range(int(rng.integers(2, 7))):
+        cls = "Door" if rng.random() < 0.4 else "Person"
+        centre = np.array([1.0, 1.0]) if rng.random() < 0.6 else np.array([4.0, 4.0])
+        z = centre + rng.normal(0.0, 0.4, size=2)
+        label = str(rng.choice(["p1", "p2"])) if cls == "Person" and rng.random() < 0.5 else None
+        scans.append([RefDetection(seq, t, cls, z, label=label)])
+        t += float(rng.choice([0.0, 0.5, 1.0]))
+    return kb, scans
+
+
+@pytest.mark.parametrize("model", ["paper", "mht"])
+@pytest.mark.parametrize("seed", range(25))
+def test_appearance_and_labels_as_reference(seed: int, model: str) -> None:
+    kb, scans = _door_scenario(seed, model)
+    wm = WorldModel(kb)
+    for scan in scans:
+        wm.ingest(
+            [
+                {"time": d.time, "class": d.cls, "position": list(d.z), "label": d.label}
+                for d in scan
+            ]
+        )
+    assert_same_hypotheses(real_hypotheses(wm), ref_hypotheses(run_reference(kb, scans)))
