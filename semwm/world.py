@@ -24,7 +24,7 @@ from semwm.detection import OutOfOrderError
 from semwm.filters.motion import FloatArray
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
-from semwm.mhf.filter import MultipleHypothesisFilter, _without
+from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted
 from semwm.mhf.state import MHFState, Track
@@ -121,7 +121,7 @@ class WorldModel:
 
     @property
     def hypothesis_count(self) -> int:
-        return len(self._state.hypotheses)
+        return self._state.hypothesis_count
 
     @property
     def object_count(self) -> int:
@@ -145,10 +145,11 @@ class WorldModel:
         gone = {k for k, t in self._state.tracks.items() if t.cls not in knowledge.classes}
         self._set_knowledge(knowledge)
         if gone:
-            hypotheses = _without(self._state.hypotheses, gone, dict(self._state.tracks))
-            referenced = set().union(*(h.tracks for h in hypotheses))
-            tracks = {k: self._state.tracks[k] for k in referenced}
-            self._state = MHFState(hypotheses, tracks, self._state.time, self._state.next_key)
+            state = self._state
+            clusters = self._mhf.without(state.clusters, gone, state.tracks)
+            referenced: set[int] = set().union(*(c.keys for c in clusters))
+            tracks = {k: state.tracks[k] for k in referenced}
+            self._state = MHFState(clusters, tracks, state.time, state.next_key)
             self._publish()
         self._log = []
 
@@ -329,7 +330,7 @@ class WorldModel:
         """Total probability of the hypotheses that hold each lineage."""
         totals: dict[int, float] = {}
         tracks = state.tracks
-        for h in state.hypotheses:
+        for h in (h for c in state.clusters for h in c.hypotheses):
             p = math.exp(h.log_weight)
             for lineage in {tracks[k].lineage for k in h.tracks}:
                 totals[lineage] = totals.get(lineage, 0.0) + p
@@ -375,7 +376,7 @@ class WorldModel:
         state = self._state
         dim = self._knowledge.world.dimension
         summaries = []
-        for h in state.hypotheses[:k]:
+        for h in state.top(k):
             objects = []
             for key in sorted(h.tracks):
                 track = state.tracks[key]

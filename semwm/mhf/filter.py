@@ -19,7 +19,7 @@ The filter is pure: it returns a new :class:`MHFState` and never changes one.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -30,7 +30,7 @@ from semwm.mhf.association import Associator, DetectionOptions
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted, predict_tracks
 from semwm.mhf.prune import merge, prune
-from semwm.mhf.state import Hypothesis, MHFState, Track
+from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
 
 
 class _TrackTable:
@@ -111,20 +111,75 @@ class MultipleHypothesisFilter:
         keys = list(state.tracks)
         predicted = self.predict(state, keys, time)
         gone = self.leaving(predicted, time)
-        hypotheses = state.hypotheses
+        clusters: Sequence[Cluster] = state.clusters
         if gone:
-            hypotheses = _without(hypotheses, gone, table.tracks)
+            clusters = self.without(clusters, gone, table.tracks)
             alive = [i for i, k in enumerate(keys) if k not in gone]
             predicted = _subset(predicted, alive)
         options = self.associator.options(predicted, measurements, table.new_key)
+        book = _ClusterBook(clusters)
         for option in options:
             table.add(option.new_track)
             for updated, _, _ in option.existing.values():
                 table.add(updated)
-            hypotheses = self._expand(hypotheses, option, table)
-        referenced: set[int] = set().union(*(h.tracks for h in hypotheses))
+            if self.factorised:
+                involved = set(option.existing) | set(option.presence)
+                if option.measurement.label is not None:
+                    involved |= table.by_label.get(option.measurement.label, set())
+                touched = book.owners(involved)
+            else:
+                touched = book.ids()
+            merged = _product(book.take(touched), self.ratio, self.max_hypotheses)
+            expanded = self._expand(merged, option, table)
+            book.put(self._split(expanded, table.tracks))
+        final = book.clusters()
+        referenced: set[int] = set().union(*(c.keys for c in final))
         tracks = {k: table.tracks[k] for k in referenced}
-        return MHFState(hypotheses, tracks, time, table.next_key)
+        return MHFState(final, tracks, time, table.next_key)
+
+    @property
+    def factorised(self) -> bool:
+        """Whether hypotheses factorise over clusters: true for ``mht``; the ``paper``
+        model's normaliser F sums over every object, so it keeps one global cluster."""
+        return self.associator.model == "mht"
+
+    def without(
+        self, clusters: Sequence[Cluster], gone: set[int], tracks: Mapping[int, Track]
+    ) -> tuple[Cluster, ...]:
+        """Remove objects from every hypothesis; hypotheses that become identical merge."""
+        result: list[Cluster] = []
+        for cluster in clusters:
+            if cluster.keys & gone:
+                result.extend(self._split(_without(cluster.hypotheses, gone, tracks), tracks))
+            else:
+                result.append(cluster)
+        return tuple(result)
+
+    def _split(
+        self, hypotheses: Sequence[Hypothesis], tracks: Mapping[int, Track]
+    ) -> list[Cluster]:
+        """Split a cluster: objects held (in the same version) by every hypothesis are
+        certain and become clusters of their own; a cluster whose only hypothesis is
+        empty carries nothing and is dropped."""
+        if not self.factorised:
+            if len(hypotheses) == 1 and not hypotheses[0].tracks:
+                return []
+            return [Cluster.of(tuple(hypotheses))]
+        common = frozenset.intersection(*(h.tracks for h in hypotheses))
+        result = [
+            Cluster((Hypothesis(0.0, frozenset({k}), tracks[k].rate),), frozenset({k}))
+            for k in common
+        ]
+        if len(hypotheses) > 1:
+            common_rate = sum(tracks[k].rate for k in common)
+            rest = prune(
+                merge((h.tracks - common, h.log_weight, h.rate - common_rate) for h in hypotheses),
+                0.0,
+                len(hypotheses),
+            )
+            if len(rest) > 1 or rest[0].tracks:
+                result.append(Cluster.of(rest))
+        return result
 
     def _expand(
         self, hypotheses: Sequence[Hypothesis], option: DetectionOptions, table: _TrackTable
@@ -168,6 +223,62 @@ class MultipleHypothesisFilter:
         return prune(merge(children), self.ratio, self.max_hypotheses)
 
 
+class _ClusterBook:
+    """The scan's working set of clusters and which cluster holds each object version."""
+
+    def __init__(self, clusters: Sequence[Cluster]) -> None:
+        self._clusters: dict[int, Cluster] = dict(enumerate(clusters))
+        self._owner = {k: i for i, c in self._clusters.items() for k in c.keys}
+        self._next = len(self._clusters)
+
+    def ids(self) -> set[int]:
+        return set(self._clusters)
+
+    def owners(self, keys: set[int]) -> set[int]:
+        owner = self._owner
+        return {owner[k] for k in keys if k in owner}
+
+    def take(self, ids: set[int]) -> list[tuple[Hypothesis, ...]]:
+        taken = []
+        for i in sorted(ids):
+            cluster = self._clusters.pop(i)
+            for k in cluster.keys:
+                del self._owner[k]
+            taken.append(cluster.hypotheses)
+        return taken
+
+    def put(self, clusters: Sequence[Cluster]) -> None:
+        for cluster in clusters:
+            self._clusters[self._next] = cluster
+            for k in cluster.keys:
+                self._owner[k] = self._next
+            self._next += 1
+
+    def clusters(self) -> tuple[Cluster, ...]:
+        return tuple(self._clusters.values())
+
+
+def _product(
+    groups: Sequence[tuple[Hypothesis, ...]], ratio: float, max_hypotheses: int
+) -> tuple[Hypothesis, ...]:
+    """Join clusters: every combination of one hypothesis from each, weights multiplied,
+    pruned as the tree is (eq. 3, n_hyp,max)."""
+    if not groups:
+        return (Hypothesis(0.0, frozenset(), 0.0),)
+    result = groups[0]
+    for hypotheses in groups[1:]:
+        result = prune(
+            merge(
+                (a.tracks | b.tracks, a.log_weight + b.log_weight, a.rate + b.rate)
+                for a in result
+                for b in hypotheses
+            ),
+            ratio,
+            max_hypotheses,
+        )
+    return result
+
+
 def _give_label(
     child: frozenset[int], holder: int, label: str, table: _TrackTable
 ) -> frozenset[int]:
@@ -180,7 +291,7 @@ def _give_label(
 
 
 def _without(
-    hypotheses: Sequence[Hypothesis], gone: set[int], tracks: dict[int, Track]
+    hypotheses: Sequence[Hypothesis], gone: set[int], tracks: Mapping[int, Track]
 ) -> tuple[Hypothesis, ...]:
     """Remove objects from every hypothesis; hypotheses that become identical merge."""
     children = []

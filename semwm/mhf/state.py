@@ -9,6 +9,8 @@ snapshots for the reorder window.
 
 from __future__ import annotations
 
+import heapq
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -77,19 +79,97 @@ class Hypothesis:
     rate: float
 
 
-@dataclass(frozen=True)
-class MHFState:
-    """The whole filter: hypotheses (most probable first, normalised) and the track table."""
+@dataclass(frozen=True, slots=True)
+class Cluster:
+    """Hypotheses over a group of objects that no detection has yet tied to others.
+
+    Under the ``mht`` association model hypothesis weights factorise over such
+    groups, so the global hypotheses are the products of one hypothesis per
+    cluster, and their probabilities the products of the clusters' (each cluster
+    is normalised on its own). ``keys`` is every object version its hypotheses hold.
+    """
 
     hypotheses: tuple[Hypothesis, ...]
+    keys: frozenset[int]
+
+    @staticmethod
+    def of(hypotheses: tuple[Hypothesis, ...]) -> Cluster:
+        return Cluster(hypotheses, frozenset().union(*(h.tracks for h in hypotheses)))
+
+
+@dataclass(frozen=True)
+class MHFState:
+    """The whole filter: independent clusters of hypotheses (each most probable first,
+    normalised) and the track table."""
+
+    clusters: tuple[Cluster, ...]
     tracks: Mapping[int, Track]
     time: float | None
     next_key: int
 
     @staticmethod
     def empty() -> MHFState:
-        return MHFState((Hypothesis(0.0, frozenset(), 0.0),), {}, None, 0)
+        return MHFState((), {}, None, 0)
 
     @property
     def best(self) -> Hypothesis:
-        return self.hypotheses[0]
+        """The maximum a posteriori hypothesis: the best of every cluster."""
+        log_weight = 0.0
+        tracks: set[int] = set()
+        rate = 0.0
+        for cluster in self.clusters:
+            h = cluster.hypotheses[0]
+            log_weight += h.log_weight
+            tracks |= h.tracks
+            rate += h.rate
+        return Hypothesis(log_weight, frozenset(tracks), rate)
+
+    @property
+    def hypothesis_count(self) -> int:
+        """Number of global hypotheses (product of the clusters' counts)."""
+        return math.prod(len(c.hypotheses) for c in self.clusters)
+
+    def top(self, k: int) -> list[Hypothesis]:
+        """The ``k`` most probable global hypotheses, best first.
+
+        k-best of a product of sorted lists: a combination is the best hypothesis
+        with some clusters moved to a lower-ranked hypothesis, written as its changes
+        ``((cluster, rank), ...)`` in increasing cluster order. Each combination is
+        reached by exactly one path (raise the last change's rank, or add a change at
+        a later cluster), and children are never more probable than their parent,
+        so a best-first search pops them in order. Memory is O(k x clusters).
+        """
+        multi = [c.hypotheses for c in self.clusters if len(c.hypotheses) > 1]
+        best = self.best
+        result: list[Hypothesis] = []
+        counter = 0
+        heap: list[tuple[float, int, tuple[tuple[int, int], ...]]] = [(-best.log_weight, 0, ())]
+        while heap and len(result) < k:
+            negative, _, changes = heapq.heappop(heap)
+            tracks = set(best.tracks)
+            rate = best.rate
+            for position, rank in changes:
+                chosen, first = multi[position][rank], multi[position][0]
+                tracks -= first.tracks
+                tracks |= chosen.tracks
+                rate += chosen.rate - first.rate
+            result.append(Hypothesis(-negative, frozenset(tracks), rate))
+            children = []
+            if changes:
+                position, rank = changes[-1]
+                if rank + 1 < len(multi[position]):
+                    step = multi[position][rank].log_weight - multi[position][rank + 1].log_weight
+                    children.append((negative + step, (*changes[:-1], (position, rank + 1))))
+            for position in range(changes[-1][0] + 1 if changes else 0, len(multi)):
+                step = multi[position][0].log_weight - multi[position][1].log_weight
+                children.append((negative + step, (*changes, (position, 1))))
+            for weight, child in children:
+                counter += 1
+                heapq.heappush(heap, (weight, counter, child))
+        return result
+
+    @property
+    def hypotheses(self) -> tuple[Hypothesis, ...]:
+        """The global hypotheses (at most 10 000), best first. For inspection and tests;
+        :meth:`top` is the way to ask for a few."""
+        return tuple(self.top(10_000))
