@@ -34,7 +34,14 @@ from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
 
 
 class _TrackTable:
-    """The scan's working track table: new versions get keys here."""
+    """The scan's working track table: new versions get keys here.
+
+    It also remembers, for the scan, which versions *took* a detection of it
+    (``fresh``: new objects and updated versions; they cannot take another one) and
+    which versions *derive* from a version that existed before the scan (updates,
+    and copies that gave a label up), so that eq. (4) and later detections of the
+    scan see an object under whichever version a hypothesis holds.
+    """
 
     def __init__(self, state: MHFState) -> None:
         self.tracks: dict[int, Track] = dict(state.tracks)
@@ -44,16 +51,25 @@ class _TrackTable:
             if track.label is not None:
                 self.by_label.setdefault(track.label, set()).add(track.key)
         self._unlabeled: dict[int, int] = {}
+        self.fresh: set[int] = set()
+        self.origin: dict[int, int] = {key: key for key in self.tracks}
+        self.derived: dict[int, list[int]] = {}
+        self.copies: dict[int, int] = {}  # pre-scan version -> its copy without label
 
     def new_key(self) -> int:
         key = self.next_key
         self.next_key += 1
         return key
 
-    def add(self, track: Track) -> None:
+    def add(self, track: Track, origin: int | None = None, fresh: bool = False) -> None:
         self.tracks[track.key] = track
         if track.label is not None:
             self.by_label.setdefault(track.label, set()).add(track.key)
+        if fresh:
+            self.fresh.add(track.key)
+        if origin is not None:
+            self.origin[track.key] = origin
+            self.derived.setdefault(origin, []).append(track.key)
 
     def unlabeled(self, key: int) -> int:
         """The version of ``key`` that gave its label up (paper 000 III-B: the older of two
@@ -61,8 +77,10 @@ class _TrackTable:
         done = self._unlabeled.get(key)
         if done is None:
             copy = self.tracks[key].relabeled(self.new_key(), None)
-            self.add(copy)
+            self.add(copy, self.origin.get(key), fresh=key in self.fresh)
             done = self._unlabeled[key] = copy.key
+            if key not in self.fresh and self.origin.get(key) == key:
+                self.copies[key] = copy.key
         return done
 
 
@@ -119,9 +137,9 @@ class MultipleHypothesisFilter:
         options = self.associator.options(predicted, measurements, table.new_key)
         book = _ClusterBook(clusters)
         for option in options:
-            table.add(option.new_track)
-            for updated, _, _ in option.existing.values():
-                table.add(updated)
+            table.add(option.new_track, fresh=True)
+            for old_key, (updated, _, _) in option.existing.items():
+                table.add(updated, origin=old_key, fresh=True)
             if self.factorised:
                 involved = set(option.existing) | set(option.presence)
                 if option.measurement.label is not None:
@@ -189,12 +207,20 @@ class MultipleHypothesisFilter:
         children: list[tuple[frozenset[int], float, float]] = []
         new_key = option.new_track.key
         new_rate = option.new_track.rate
-        presence = option.presence
+        label = option.measurement.label
+        per_parent = self.associator.model == "paper"
+        # eq. (4): an object counts under any version a hypothesis holds of it
+        presence = dict(option.presence)
+        for key, value in option.presence.items():
+            for version in table.derived.get(key, ()):
+                presence[version] = value
         presence_keys = presence.keys()
         existing = option.existing
         existing_keys = existing.keys()
-        label = option.measurement.label
-        per_parent = self.associator.model == "paper"
+        # objects that gave their label up earlier in the scan may still take this one
+        copies = {table.copies[k]: k for k in existing if k in table.copies}
+        copy_keys = copies.keys()
+        fresh = table.fresh
         for h in hypotheses:
             tracks = h.tracks
             birth_rate, birth_log = option.new_rate, option.new_log
@@ -203,8 +229,12 @@ class MultipleHypothesisFilter:
                 if log_num > birth_log:
                     birth_rate, birth_log = rate, log_num
             log_norm = h.log_weight
-            if per_parent:  # paper 002 eqs. (5)-(7): F sums the frequencies open to this parent
-                log_norm -= math.log(option.clutter_rate + birth_rate + h.rate)
+            if per_parent:
+                # paper 002 eqs. (5)-(7): F sums the frequencies open to this detection;
+                # objects that took a detection of this scan cannot take another
+                taken = tracks & fresh
+                open_rate = h.rate - sum(table.tracks[k].rate for k in taken) if taken else h.rate
+                log_norm -= math.log(option.clutter_rate + birth_rate + open_rate)
             if option.log_clutter > -math.inf:
                 children.append((tracks, log_norm + option.log_clutter, h.rate))
             if birth_log > -math.inf:
@@ -217,6 +247,13 @@ class MultipleHypothesisFilter:
                 child = (tracks - {k}) | {updated.key}
                 if label is not None:
                     child = _give_label(child, updated.key, label, table)
+                children.append((child, log_norm + log_num, h.rate + rate_change))
+            for k in copy_keys & tracks:
+                updated, log_num, rate_change = existing[copies[k]]
+                holder = updated.key if label is not None else table.unlabeled(updated.key)
+                child = (tracks - {k}) | {holder}
+                if label is not None:
+                    child = _give_label(child, holder, label, table)
                 children.append((child, log_norm + log_num, h.rate + rate_change))
         if not children:  # nothing can explain it: a knowledge base with no clutter or births
             return tuple(hypotheses)

@@ -75,10 +75,10 @@ class RefHypothesis:
 
 
 class ReferenceMHF:
-    def __init__(self, knowledge: Knowledge, *, f_counts_taken: bool = True) -> None:
-        """``f_counts_taken``: F sums f_existing over every object of the parent, as the MHF
-        does today, including objects that already took a detection of this scan. ``False``
-        is the semantics tests/mhf's xfail tests expect (only objects open to the detection)."""
+    def __init__(self, knowledge: Knowledge, *, f_counts_taken: bool = False) -> None:
+        """``f_counts_taken``: F sums f_existing over every object of the parent, including
+        objects that already took a detection of this scan (the MHF's first behaviour, kept
+        for comparison). ``False`` (the MHF's): only objects open to the detection."""
         self.k = knowledge
         self.f_counts_taken = f_counts_taken
         self.model = knowledge.world.association_model

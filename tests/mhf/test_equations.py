@@ -266,11 +266,6 @@ def test_person_far_from_tracked_door_gets_base_rate() -> None:
     assert got[(door, person)] / got[(door,)] == pytest.approx(FN / FC, rel=1e-12)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: eq. (4) presence is keyed by the door's pre-scan version; in hypotheses where "
-    "the door took a detection earlier in the same scan, the door no longer counts",
-)
 def test_person_near_door_updated_in_the_same_scan() -> None:
     """A scan sees the door and a person next to it: in the hypothesis where the door took
     the door detection, the door is still present, so the person's f_new is f_presence."""
@@ -287,11 +282,6 @@ def test_person_near_door_updated_in_the_same_scan() -> None:
     assert got[with_person] / got[door] == pytest.approx(F_PRES / FC, rel=1e-9)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: F of eqs. (5)-(7) counts f_existing of an object created (or updated) earlier "
-    "in the same scan, though it cannot take this detection (one detection per object per scan)",
-)
 def test_scan_normaliser_counts_only_objects_open_to_the_detection() -> None:
     """One scan, two detections far apart, empty world. The object the first creates cannot
     take the second, so for the second F = f_clutter + f_new, as for the first: the four

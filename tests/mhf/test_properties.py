@@ -184,12 +184,6 @@ def test_two_hundred_objects_in_one_scan(model: str, f_clutter: float) -> None:
     _two_hundred(model, f_clutter)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: under 'paper', F of eqs. (5)-(7) counts f_existing of objects that already took "
-    "a detection of this scan (h.rate); they cannot take this one, so each new object of the "
-    "scan lowers p(new) of the next and the MAP calls some of the 200 detections clutter",
-)
 def test_two_hundred_objects_in_one_scan_paper_model() -> None:
     _two_hundred("paper", 0.1)
 

@@ -139,12 +139,6 @@ def test_label_given_up_is_not_given_back_by_an_unlabeled_update() -> None:
             assert h[0][0] is None and h[1][0] == "r1"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: an object that gave its label up earlier in the scan is a new version (key) "
-    "that is not among the scan's association candidates, so it cannot take a later detection "
-    "of the same scan",
-)
 def test_object_that_gave_up_its_label_can_take_a_later_detection_of_the_scan() -> None:
     wm = _robots()
     wm.ingest(det(0.0, "Robot", 0.0, 0.0, label="r1"))
