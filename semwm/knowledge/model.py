@@ -56,6 +56,11 @@ class WorldSettings(Frozen):
         ``paper``: the scaled likelihood of paper 002 eq. (8) with frequency priors
         (eqs. 5-7). ``mht``: the standard MHT model (innovation density N(z; Hx, S),
         clutter and birth rates spread over ``region``).
+    missed_detection_term
+        ``mht`` only: multiply each hypothesis by exp(-dt * sum f_existing) for the time
+        its objects went undetected (the Poisson missed-detection term), so duplicates
+        and unconfirmed objects lose probability while unseen. ``false`` reproduces
+        paper 002's behaviour, where only P_max removes them.
     gate_probability
         Mahalanobis gate: an object further than the chi-square quantile of this
         probability from a detection spawns no association. 1.0 disables gating.
@@ -71,6 +76,7 @@ class WorldSettings(Frozen):
     pruning_ratio: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.01
     max_hypotheses: Annotated[int, Field(ge=1)] = 1000
     association_model: Literal["paper", "mht"] = "paper"
+    missed_detection_term: bool = True
     gate_probability: Annotated[float, Field(gt=0.0, le=1.0)] = 0.9999
     region: tuple[tuple[float, float], ...] | None = None
     default_detector: str | None = None

@@ -75,11 +75,12 @@ _WORLD_FIELDS = (
     "pruning_ratio",
     "max_hypotheses",
     "association_model",
+    "missed_detection_term",
     "gate_probability",
     "region",
     "default_detector",
 )
-_WORLD_TEXTS = ("association_model", "default_detector")
+_WORLD_TEXTS = ("association_model", "missed_detection_term", "default_detector")
 _CLASS_SCALARS = (
     "detection_frequency",
     "new_frequency",
@@ -573,6 +574,8 @@ def _write_world(root: etree._Element, world: WorldSettings) -> None:
             continue
         if name == "region":
             _add_matrix(element, name, value)
+        elif isinstance(value, bool):
+            _add(element, name, "true" if value else "false")
         else:
             _add(element, name, value if isinstance(value, str) else _format_number(value))
 

@@ -94,6 +94,8 @@ class MultipleHypothesisFilter:
         self.associator = Associator(knowledge, self.factory, self.taxonomy)
         self.ratio = knowledge.world.pruning_ratio
         self.max_hypotheses = knowledge.world.max_hypotheses
+        world = knowledge.world
+        self.missed_detections = world.association_model == "mht" and world.missed_detection_term
 
     def predict(self, state: MHFState, keys: Sequence[int], time: float) -> Predicted:
         return predict_tracks([state.tracks[k] for k in keys], time, self.factory)
@@ -134,6 +136,8 @@ class MultipleHypothesisFilter:
             clusters = self.without(clusters, gone, table.tracks)
             alive = [i for i, k in enumerate(keys) if k not in gone]
             predicted = _subset(predicted, alive)
+        if self.missed_detections and state.time is not None and time > state.time:
+            clusters = self._undetected(clusters, time - state.time, table.tracks)
         options = self.associator.options(predicted, measurements, table.new_key)
         book = _ClusterBook(clusters)
         for option in options:
@@ -154,6 +158,33 @@ class MultipleHypothesisFilter:
         referenced: set[int] = set().union(*(c.keys for c in final))
         tracks = {k: table.tracks[k] for k in referenced}
         return MHFState(final, tracks, time, table.next_key)
+
+    def _undetected(
+        self, clusters: Sequence[Cluster], elapsed: float, tracks: Mapping[int, Track]
+    ) -> tuple[Cluster, ...]:
+        r"""The ``mht`` model's missed-detection term: objects detected at rates f_e (Hz) that
+        produced no detection for ``elapsed`` seconds.
+
+        .. math:: p(\text{no detection in } \Delta t \mid h) = \exp(-\Delta t \sum_{o \in h} f_e(o))
+
+        Clutter and birth rates are the same in every hypothesis and cancel; this term
+        is what makes a hypothesis with a duplicate or an unconfirmed object less
+        probable while it is not seen. It factorises over clusters.
+        """
+        result = []
+        for cluster in clusters:
+            if len(cluster.hypotheses) == 1:
+                result.append(cluster)
+                continue
+            hypotheses = prune(
+                merge(
+                    (h.tracks, h.log_weight - elapsed * h.rate, h.rate) for h in cluster.hypotheses
+                ),
+                self.ratio,
+                self.max_hypotheses,
+            )
+            result.extend(self._split(hypotheses, tracks))
+        return tuple(result)
 
     @property
     def factorised(self) -> bool:

@@ -85,6 +85,7 @@ class ReferenceMHF:
         self.ratio = knowledge.world.pruning_ratio
         self.detector = knowledge.detectors[knowledge.default_detector]
         self.hypotheses = [RefHypothesis(1.0, [])]
+        self.time: float | None = None
         region = knowledge.world.region
         self.volume = math.prod(hi - lo for lo, hi in region) if region else 1.0
 
@@ -169,6 +170,11 @@ class ReferenceMHF:
                 merged[key].p += h.p
             else:
                 merged[key] = RefHypothesis(h.p, objects)
+        if self.model == "mht" and self.time is not None and t > self.time:
+            # Poisson missed-detection term: no object of h was detected for t - time seconds
+            for h in merged.values():
+                h.p *= math.exp(-(t - self.time) * sum(self.f_existing(o.cls) for o in h.objects))
+        self.time = t
         # each hypothesis: (p, objects, lineages that already took a detection of this scan)
         current = [(h.p, h.objects, set(), list(h.objects)) for h in merged.values()]
         total = sum(c[0] for c in current)

@@ -91,6 +91,9 @@ def test_second_detection_five_hypotheses(model: str) -> None:
         V = 40.0
         dens = math.exp(-0.5 * y @ np.linalg.inv(S) @ y) / (2 * math.pi * math.sqrt(np.linalg.det(S)))
         p_new1, p_cl1 = FN / (FC + FN), FC / (FC + FN)  # both spread by 1/V
+        # missed-detection term: the object born at the first detection was not detected
+        # for dt seconds: p_new1 is multiplied by exp(-FE dt) before the second detection
+        p_new1 *= math.exp(-FE * dt)
         w = {
             "new,new": p_new1 * FN / V,
             "new,same": p_new1 * FE * dens,
