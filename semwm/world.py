@@ -54,10 +54,14 @@ class _LoggedScan:
 
 @dataclass(frozen=True)
 class _Published:
-    lineage: int
-    cls: str
-    position: FloatArray
-    covariance: FloatArray
+    """An object as last published: its version (positions are computed only if its id
+    has to be handed over)."""
+
+    track: Track
+
+    @property
+    def lineage(self) -> int:
+        return self.track.lineage
 
 
 def _scan_key(m: Measurement) -> ScanKey:
@@ -246,11 +250,9 @@ class WorldModel:
                 self._ids[track.lineage] = self._next_id
                 self._next_id += 1
         self._ids = {lineage: i for lineage, i in self._ids.items() if lineage in alive}
-        published = {}
-        for lineage, track in current.items():
-            x, P = _summary_position(track, dim)
-            published[self._ids[lineage]] = _Published(lineage, track.cls, x, P)
-        self._published = published
+        self._published = {
+            self._ids[lineage]: _Published(track) for lineage, track in current.items()
+        }
 
     def _hand_over(self, fresh: list[Track], dim: int) -> None:
         lost = list(self._lost.items())
@@ -258,10 +260,11 @@ class WorldModel:
         for a, track in enumerate(fresh):
             x, P = _summary_position(track, dim)
             for b, (_, pub) in enumerate(lost):
-                if not self.taxonomy.compatible(track.cls, pub.cls):
+                if not self.taxonomy.compatible(track.cls, pub.track.cls):
                     continue
-                delta = x - pub.position
-                d2 = float(delta @ np.linalg.solve(P + pub.covariance, delta))
+                x_lost, P_lost = _summary_position(pub.track, dim)
+                delta = x - x_lost
+                d2 = float(delta @ np.linalg.solve(P + P_lost, delta))
                 if d2 <= _HANDOVER_GATE:
                     cost[a, b] = d2
         rows, cols = linear_sum_assignment(cost)

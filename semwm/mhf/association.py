@@ -171,11 +171,38 @@ class Associator:
     def _new_states(
         self, measurements: Sequence[Measurement]
     ) -> list[tuple[FloatArray, FloatArray, FloatArray]]:
-        states: list[tuple[FloatArray, FloatArray, FloatArray]] = []
-        for m in measurements:
-            x, P, mu = self.factory.filter_for(m.cls).initial_states(m.z[None, :])
-            states.append((x[0], P[0], mu[0]))
-        return states
+        """Initial filter states of the objects each detection would start, one batched call
+        per class."""
+        by_class: dict[str, list[int]] = {}
+        for j, m in enumerate(measurements):
+            by_class.setdefault(m.cls, []).append(j)
+        states: dict[int, tuple[FloatArray, FloatArray, FloatArray]] = {}
+        for cls, rows in by_class.items():
+            z = np.stack([measurements[j].z for j in rows])
+            x, P, mu = self.factory.filter_for(cls).initial_states(z)
+            for row, j in enumerate(rows):
+                states[j] = (x[row], P[row], mu[row])
+        return [states[j] for j in range(len(measurements))]
+
+    def _class_likelihoods(
+        self, tracks: Sequence[Track], measurements: Sequence[Measurement]
+    ) -> FloatArray:
+        """L_class of eq. (8) for every (detection, object) pair, ``(D, T)``, evaluated once
+        per pair of distinct classes."""
+        track_classes = sorted({t.cls for t in tracks})
+        detection_classes = sorted({m.cls for m in measurements})
+        table = np.array(
+            [
+                [self.taxonomy.class_likelihood(tc, dc) for tc in track_classes]
+                for dc in detection_classes
+            ]
+        )
+        t_index = {c: i for i, c in enumerate(track_classes)}
+        d_index = {c: i for i, c in enumerate(detection_classes)}
+        rows = np.fromiter((d_index[m.cls] for m in measurements), dtype=np.intp)
+        cols = np.fromiter((t_index[t.cls] for t in tracks), dtype=np.intp)
+        result: FloatArray = table[rows[:, None], cols[None, :]]
+        return result
 
     def _existing(
         self,
@@ -190,9 +217,7 @@ class Associator:
             return found
         z = np.stack([m.z for m in measurements])  # (D, d)
         R = np.stack([m.R for m in measurements])  # (D, d, d)
-        likelihood = np.array(
-            [[self.taxonomy.class_likelihood(t.cls, m.cls) for t in tracks] for m in measurements]
-        )  # (D, T): L_class of eq. (8)
+        likelihood = self._class_likelihoods(tracks, measurements)  # (D, T): eq. (8)
         candidate = likelihood > 0.0
         diff = z[:, None, :] - predicted.position[None, :, :]  # (D, T, d)
         if math.isfinite(self.gate):

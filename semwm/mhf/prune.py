@@ -41,6 +41,9 @@ def prune(
         floor = best + math.log(ratio)
         items = [item for item in items if item[0] >= floor]
     del items[max_hypotheses:]
-    weights = np.fromiter((item[0] for item in items), dtype=float, count=len(items))
-    log_total = best + math.log(float(np.exp(weights - best).sum()))
+    if len(items) <= 32:  # small sets: plain floats beat numpy's per-call cost
+        log_total = best + math.log(math.fsum(math.exp(item[0] - best) for item in items))
+    else:
+        weights = np.fromiter((item[0] for item in items), dtype=float, count=len(items))
+        log_total = best + math.log(float(np.exp(weights - best).sum()))
     return tuple(Hypothesis(lw - log_total, tracks, rate) for lw, tracks, rate in items)
