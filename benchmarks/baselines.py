@@ -455,3 +455,12 @@ def machine_info() -> dict[str, Any]:
         "commit": _commit(),
         "versions": {n: _version(n) for n in ("semwm", "stonesoup", "filterpy", "numpy", "scipy")},
     }
+
+
+def fmt(value: Any, digits: int = 3) -> str:
+    """A table cell: ``—`` for missing values, floats to ``digits`` significant digits."""
+    if value is None:
+        return "—"
+    if isinstance(value, float):
+        return f"{value:.{digits}g}"
+    return str(value)

@@ -36,7 +36,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baselines import machine_info
+from baselines import fmt, machine_info
 
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.model import Knowledge
@@ -177,14 +177,6 @@ def run(quick: bool = False, size_limit: float = 60.0) -> dict[str, Any]:
     return doc
 
 
-def _fmt(v: Any, digits: int = 3) -> str:
-    if v is None:
-        return "—"
-    if isinstance(v, float):
-        return f"{v:.{digits}g}"
-    return str(v)
-
-
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["machine"]
     g = doc["grid"]
@@ -209,11 +201,11 @@ def markdown(doc: dict[str, Any]) -> str:
     for r in g["sizes"]:
         lines.append(
             f"| {r['n']} | {r['status']} | {r['frames_done']}/{r['frames_planned']} | "
-            f"{_fmt(r['steady_cpu_ms_per_frame'])} | {_fmt(r['steady_cpu_us_per_detection'])} | "
-            f"{_fmt(r['warmup_cpu_ms_total'])} | {_fmt(r['max_cpu_ms_per_frame'])} | "
+            f"{fmt(r['steady_cpu_ms_per_frame'])} | {fmt(r['steady_cpu_us_per_detection'])} | "
+            f"{fmt(r['warmup_cpu_ms_total'])} | {fmt(r['max_cpu_ms_per_frame'])} | "
             f"{r['hypotheses_last']}/{r['hypotheses_max']}/{r['max_hypotheses_cap']} | "
-            f"{r['objects_last']} | {_fmt(r['objects_found_frame'])} | "
-            f"{_fmt(r['peak_traced_mb_steady_frames'])} | {_fmt(r['ru_maxrss_mb_after'])} |"
+            f"{r['objects_last']} | {fmt(r['objects_found_frame'])} | "
+            f"{fmt(r['peak_traced_mb_steady_frames'])} | {fmt(r['ru_maxrss_mb_after'])} |"
         )
     if "loglog_slope" in g:
         lines += [
@@ -230,10 +222,10 @@ def markdown(doc: dict[str, Any]) -> str:
     ]
     for r in b["runs"]:
         lines.append(
-            f"| {r['max_hypotheses']} | {r['duration_s']} | {_fmt(r['gospa'])} | "
-            f"{_fmt(r['gospa_localisation'])} | {_fmt(r['gospa_missed'])} | "
-            f"{_fmt(r['gospa_false'])} | {r['id_switches']} | "
-            f"{_fmt(r['time_per_detection_s'] * 1e6)} |"
+            f"| {r['max_hypotheses']} | {r['duration_s']} | {fmt(r['gospa'])} | "
+            f"{fmt(r['gospa_localisation'])} | {fmt(r['gospa_missed'])} | "
+            f"{fmt(r['gospa_false'])} | {r['id_switches']} | "
+            f"{fmt(r['time_per_detection_s'] * 1e6)} |"
         )
     lines.append("")
     return "\n".join(lines)

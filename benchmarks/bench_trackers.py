@@ -28,6 +28,7 @@ from baselines import (
     FilterPyNN,
     StoneSoupTracker,
     TrackerTimeout,
+    fmt,
     machine_info,
     tuning_from_knowledge,
 )
@@ -182,14 +183,6 @@ def run(
     return doc
 
 
-def _fmt(v: Any, digits: int = 3) -> str:
-    if v is None:
-        return "—"
-    if isinstance(v, float):
-        return f"{v:.{digits}g}"
-    return str(v)
-
-
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["machine"]
     lines = [
@@ -215,16 +208,16 @@ def markdown(doc: dict[str, Any]) -> str:
         for tracker, s in e["summary"].items():
             tpd = s["time_per_detection_s"]
             lines.append(
-                f"| {tracker} | {_fmt(s['gospa'])} | {_fmt(s['gospa_localisation'])} | "
-                f"{_fmt(s['gospa_missed'])} | {_fmt(s['gospa_false'])} | "
-                f"{_fmt(s['id_switches'])} | {_fmt(tpd * 1e6 if tpd else None)} | "
-                f"{_fmt(s['peak_memory_mb'])} | {s['n_ok']}/{len(doc['seeds'])} |"
+                f"| {tracker} | {fmt(s['gospa'])} | {fmt(s['gospa_localisation'])} | "
+                f"{fmt(s['gospa_missed'])} | {fmt(s['gospa_false'])} | "
+                f"{fmt(s['id_switches'])} | {fmt(tpd * 1e6 if tpd else None)} | "
+                f"{fmt(s['peak_memory_mb'])} | {s['n_ok']}/{len(doc['seeds'])} |"
             )
         lines += ["", "| semwm / peer | GOSPA | time/det | memory |", "|---|---|---|---|"]
         for peer, r in e["ratios_semwm_over_peer"].items():
             lines.append(
-                f"| {peer} | {_fmt(r['gospa'])} | {_fmt(r['time_per_detection_s'])} | "
-                f"{_fmt(r['peak_memory_mb'])} |"
+                f"| {peer} | {fmt(r['gospa'])} | {fmt(r['time_per_detection_s'])} | "
+                f"{fmt(r['peak_memory_mb'])} |"
             )
         t = e["peer_tuning"]
         lines += [
