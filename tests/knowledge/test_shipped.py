@@ -110,7 +110,9 @@ def test_sim2_is_paper_002_simulation_2() -> None:
 def test_robocup_is_paper_000() -> None:
     knowledge = load_knowledge(shipped_knowledge_path("robocup.yaml"))
     assert knowledge.world.region == ((-9.0, 9.0), (-6.0, 6.0))
-    assert (knowledge.world.pruning_ratio, knowledge.world.max_hypotheses) == (0.01, 1000)
+    # alpha = 0.01 as paper 000's C1; n_hyp,max 100 instead of its 1000: measured as
+    # accurate at 6-9x less time per detection (comment in robocup.yaml)
+    assert (knowledge.world.pruning_ratio, knowledge.world.max_hypotheses) == (0.01, 100)
     categories = {name: c.category for name, c in knowledge.classes.items() if c.category}
     assert categories == {
         "Peer": "actively_controlled",
