@@ -88,18 +88,24 @@ def validate_command(args: argparse.Namespace) -> int:
     return status
 
 
+def _report(error: Exception) -> int:
+    """Print why a file could not be used: one ``FILE:LINE: message`` line per problem
+    (stdout), or the I/O or format error (stderr)."""
+    if isinstance(error, KnowledgeError):
+        for problem in error.problems:
+            print(problem)
+    else:
+        print(error, file=sys.stderr)
+    return EXIT_INVALID
+
+
 def convert_command(args: argparse.Namespace) -> int:
     """Read ``IN`` and write the same document to ``OUT`` in the other format."""
     try:
         document = load_document(args.source)
         dump_document(document, args.target)
-    except KnowledgeError as error:
-        for problem in error.problems:
-            print(problem)
-        return EXIT_INVALID
-    except (OSError, UnknownFormatError) as error:
-        print(error, file=sys.stderr)
-        return EXIT_INVALID
+    except (KnowledgeError, OSError, UnknownFormatError) as error:
+        return _report(error)
     print(f"wrote {args.target}")
     return EXIT_OK
 
@@ -214,13 +220,8 @@ def show_command(args: argparse.Namespace) -> int:
     """Print one class's resolved settings, or the whole file's summary."""
     try:
         knowledge = load_knowledge(args.file)
-    except KnowledgeError as error:
-        for problem in error.problems:
-            print(problem)
-        return EXIT_INVALID
-    except (OSError, UnknownFormatError) as error:
-        print(error, file=sys.stderr)
-        return EXIT_INVALID
+    except (KnowledgeError, OSError, UnknownFormatError) as error:
+        return _report(error)
     if args.cls is None:
         print("\n".join(summary_lines(knowledge, args.file)))
         return EXIT_OK
