@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import datetime as dt
 import itertools
+import json
 import os
 import platform
 import subprocess
@@ -464,3 +465,14 @@ def fmt(value: Any, digits: int = 3) -> str:
     if isinstance(value, float):
         return f"{value:.{digits}g}"
     return str(value)
+
+
+def write_results(
+    directory: Path, name: str, doc: dict[str, Any], markdown: str, quick: bool
+) -> None:
+    """Write ``NAME[_quick].json`` and ``.md`` under ``directory`` and print the table."""
+    directory.mkdir(exist_ok=True)
+    suffix = "_quick" if quick else ""
+    (directory / f"{name}{suffix}.json").write_text(json.dumps(doc, indent=2) + "\n")
+    (directory / f"{name}{suffix}.md").write_text(markdown)
+    print(markdown)

@@ -24,7 +24,6 @@ Writes ``benchmarks/results/scaling.json`` and ``scaling.md``.
 from __future__ import annotations
 
 import argparse
-import json
 import resource
 import sys
 import time
@@ -36,7 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baselines import fmt, machine_info
+from baselines import fmt, machine_info, write_results
 
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.model import Knowledge
@@ -237,11 +236,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--size-limit", type=float, default=60.0)
     args = parser.parse_args(argv)
     doc = run(quick=args.quick, size_limit=args.size_limit)
-    RESULTS.mkdir(exist_ok=True)
-    suffix = "_quick" if args.quick else ""
-    (RESULTS / f"scaling{suffix}.json").write_text(json.dumps(doc, indent=2) + "\n")
-    (RESULTS / f"scaling{suffix}.md").write_text(markdown(doc))
-    print(markdown(doc))
+    write_results(RESULTS, "scaling", doc, markdown(doc), args.quick)
     return doc
 
 

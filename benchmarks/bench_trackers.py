@@ -12,7 +12,6 @@ timings). Writes ``benchmarks/results/trackers.json`` and ``trackers.md``.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import tracemalloc
@@ -31,6 +30,7 @@ from baselines import (
     fmt,
     machine_info,
     tuning_from_knowledge,
+    write_results,
 )
 
 from semwm.knowledge.loader import load_knowledge
@@ -246,11 +246,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     )
     args = parser.parse_args(argv)
     doc = run(quick=args.quick, time_limit=args.time_limit)
-    RESULTS.mkdir(exist_ok=True)
-    suffix = "_quick" if args.quick else ""
-    (RESULTS / f"trackers{suffix}.json").write_text(json.dumps(doc, indent=2) + "\n")
-    (RESULTS / f"trackers{suffix}.md").write_text(markdown(doc))
-    print(markdown(doc))
+    write_results(RESULTS, "trackers", doc, markdown(doc), args.quick)
     return doc
 
 
