@@ -30,6 +30,7 @@ matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 
@@ -39,6 +40,8 @@ from semwm.world_types import WorldState
 
 MAX_DETECTIONS_DRAWN = 1500
 """More detections than this are subsampled (every k-th) so tracks stay visible."""
+
+Limits = tuple[tuple[float, float], tuple[float, float]]
 
 STATIC_TOLERANCE_M = 1e-6
 """A truth object that moves less than this over the run is drawn as static."""
@@ -197,18 +200,30 @@ def _draw_truth(ax: Any, paths: list[TruthPath], colours: dict[str, Any]) -> lis
     return list(handles.values())
 
 
+def _last_inside(xs: np.ndarray, ys: np.ndarray, limits: Limits) -> int:
+    """Index of the last point inside the drawn limits (else the last point)."""
+    (x_lo, x_hi), (y_lo, y_hi) = limits
+    inside = np.flatnonzero((xs >= x_lo) & (xs <= x_hi) & (ys >= y_lo) & (ys <= y_hi))
+    return int(inside[-1]) if inside.size else len(xs) - 1
+
+
 def _draw_world(
-    ax: Any, tracks: dict[int, Track], colours: dict[str, Any], paper_style: bool
+    ax: Any,
+    tracks: dict[int, Track],
+    colours: dict[str, Any],
+    paper_style: bool,
+    limits: Limits,
 ) -> list[Line2D]:
     handles: dict[str, Line2D] = {}
     for track_id, track in sorted(tracks.items()):
         colour = "k" if paper_style else colours[track.cls]
         xs, ys = track.rows[:, 1], track.rows[:, 2]
         ax.plot(xs, ys, "-", lw=1.0, color=colour, zorder=3)
-        ax.plot(xs[-1:], ys[-1:], "o", ms=2.5, color=colour, zorder=3)
+        end = _last_inside(xs, ys, limits)
+        ax.plot(xs[end : end + 1], ys[end : end + 1], "o", ms=2.5, color=colour, zorder=3)
         ax.annotate(
             f"#{track_id} {track.label or track.cls}",
-            (float(xs[-1]), float(ys[-1])),
+            (float(xs[end]), float(ys[end])),
             xytext=(4, 3),
             textcoords="offset points",
             fontsize=6,
@@ -225,9 +240,9 @@ def _draw_world(
                 lw=1.0,
                 marker="o",
                 ms=2.5,
-                label=f"world: {track.cls} track (#id at its end)"
+                label=f"world: {track.cls} track (#id at its last point in view)"
                 if not paper_style
-                else "world track (#id at its end)",
+                else "world track (#id at its last point in view)",
             ),
         )
     return list(handles.values())
@@ -236,8 +251,17 @@ def _draw_world(
 def plot_run(
     scenario: Scenario, worlds: Sequence[WorldState], metrics: Metrics, path: str | Path
 ) -> Path:
-    """Draw a run to ``path`` (PNG): detections, truth, the world's tracks, the
-    scenario's marks and the metrics in the title; returns the path."""
+    """Draw a run (:func:`draw_run`) to ``path`` (PNG); returns the path."""
+    fig = draw_run(scenario, worlds, metrics)
+    out = Path(path)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
+def draw_run(scenario: Scenario, worlds: Sequence[WorldState], metrics: Metrics) -> Figure:
+    """The figure of a run: detections, truth, the world's tracks, the scenario's
+    marks and the metrics in the title (the caller closes it)."""
     paper_style = scenario.name == "sim2"
     paths = truth_paths(scenario)
     tracks = world_tracks(scenario, worlds)
@@ -255,7 +279,8 @@ def plot_run(
 
     handles = [_draw_detections(ax, scenario)]
     handles += _draw_truth(ax, paths, colours)
-    handles += _draw_world(ax, tracks, colours, paper_style)
+    limits = ((x_lo - 0.5, x_hi + 0.5), (y_lo - 0.5, y_hi + 0.5))
+    handles += _draw_world(ax, tracks, colours, paper_style, limits)
 
     door = scenario.metadata.get("door")
     if isinstance(door, tuple | list):
@@ -276,6 +301,8 @@ def plot_run(
     moments = scenario.metadata.get("moments")
     if isinstance(moments, dict):
         _annotate_moments(ax, scenario, worlds, moments)
+        track_of_e = false_track_of_e(scenario, worlds) is not None
+        f_text = "F: where it was removed" if track_of_e else "no track born there, so no F"
         handles.append(
             Line2D(
                 [],
@@ -284,12 +311,12 @@ def plot_run(
                 marker="$A$",
                 color="k",
                 ms=7,
-                label="A-B, C-D: occlusions; E: false pair; F: E's track gone",
+                label=f"A-B, C-D: occlusions; E: false pair; {f_text}",
             )
         )
 
-    ax.set_xlim(x_lo - 0.5, x_hi + 0.5)
-    ax.set_ylim(y_lo - 0.5, y_hi + 0.5)
+    ax.set_xlim(*limits[0])
+    ax.set_ylim(*limits[1])
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
@@ -309,17 +336,14 @@ def plot_run(
         frameon=False,
     )
     fig.tight_layout()
-    out = Path(path)
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return fig
 
 
 def _annotate_moments(
     ax: Any, scenario: Scenario, worlds: Sequence[WorldState], moments: dict[str, Any]
 ) -> None:
     """A-D at the person's true position, E at the false pair, F where the false
-    track of E was last in the world (else at E)."""
+    track of E was last in the world (when there was one)."""
     truth = {frame.time: frame.objects[0].position for frame in scenario.truth if frame.objects}
     times = np.asarray(sorted(truth))
     places: dict[str, tuple[float, float]] = {}
@@ -331,7 +355,8 @@ def _annotate_moments(
     if isinstance(pair, list) and pair:
         places["E"] = (pair[0][0], pair[0][1])
         found = false_track_of_e(scenario, worlds)
-        places["F"] = (found[1][-1, 1], found[1][-1, 2]) if found else places["E"]
+        if found:
+            places["F"] = (found[1][-1, 1], found[1][-1, 2])
     for name, (x, y) in places.items():
         ax.annotate(
             name,
