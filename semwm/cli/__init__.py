@@ -19,7 +19,14 @@ import sys
 from collections.abc import Callable, Sequence
 from importlib import metadata
 
-from semwm.cli.common import EXIT_USAGE, LOG_LEVELS, CommandError, Parser, Subparsers
+from semwm.cli.common import (
+    EXIT_USAGE,
+    LOG_LEVELS,
+    CommandError,
+    Parser,
+    Subparsers,
+    description,
+)
 from semwm.cli.knowledge import add_knowledge_command
 from semwm.cli.serve import add_serve_command
 from semwm.cli.simulate import add_simulate_command
@@ -46,7 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``semwm`` parser with every command of :data:`COMMANDS`."""
     parser = Parser(
         prog="semwm",
-        description=__doc__,
+        description=description(__doc__),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"semwm {version()}")

@@ -37,6 +37,11 @@ class Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+def description(docstring: str | None) -> str:
+    """A module docstring as ``--help`` text: without reST's double backquotes."""
+    return (docstring or "").replace("``", "")
+
+
 def positive_float(text: str) -> float:
     """An ``argparse`` type: a finite number > 0."""
     try:

@@ -14,7 +14,14 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-from semwm.cli.common import EXIT_INVALID, EXIT_OK, EXIT_USAGE, CommandError, Subparsers
+from semwm.cli.common import (
+    EXIT_INVALID,
+    EXIT_OK,
+    EXIT_USAGE,
+    CommandError,
+    Subparsers,
+    description,
+)
 from semwm.knowledge.loader import (
     UnknownFormatError,
     analyse_file,
@@ -36,7 +43,7 @@ def add_knowledge_command(subparsers: Subparsers) -> None:
     knowledge = subparsers.add_parser(
         "knowledge",
         help="validate, convert and show knowledge files (XML or YAML)",
-        description=__doc__,
+        description=description(__doc__),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     commands = knowledge.add_subparsers(dest="knowledge_command", metavar="COMMAND", required=True)

@@ -27,7 +27,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from semwm.cli.common import EXIT_INVALID, CommandError, Subparsers, positive_float
+from semwm.cli.common import (
+    EXIT_INVALID,
+    CommandError,
+    Subparsers,
+    description,
+    positive_float,
+)
 from semwm.knowledge.loader import UnknownFormatError, load_document
 from semwm.knowledge.model import KnowledgeDocument
 from semwm.knowledge.problems import KnowledgeError
@@ -128,7 +134,7 @@ def add_simulate_command(subparsers: Subparsers) -> argparse.ArgumentParser:
     parser: argparse.ArgumentParser = subparsers.add_parser(
         "simulate",
         help="run a simulated scenario through the world model and report metrics",
-        description=__doc__,
+        description=description(__doc__),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
