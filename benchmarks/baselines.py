@@ -498,7 +498,7 @@ def write_results(
 
     The files go to :data:`OUT` (untracked) unless ``update_results``: then to
     ``directory`` (the committed results, :data:`RESULTS`), and benchmarks/README.md
-    is re-rendered from the committed results (``benchmarks/render.py``).
+    is re-rendered from the committed results (``benchmarks/render_tables.py``).
     """
     target = directory if update_results else OUT
     target.mkdir(parents=True, exist_ok=True)
@@ -508,7 +508,7 @@ def write_results(
     print(markdown)
     print(f"wrote {target / name}{suffix}.json and .md")
     if update_results:
-        import render  # benchmarks/render.py, beside this file
+        import render_tables  # beside this file
 
-        render.main([])
+        render_tables.main([])
     return target

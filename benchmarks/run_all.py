@@ -4,7 +4,7 @@
 
 Results go to ``benchmarks/out/`` (untracked; ``*_quick.*`` with ``--quick``). With
 ``--update-results`` they replace the committed ``benchmarks/results/`` and
-benchmarks/README.md's tables are re-rendered from them (``benchmarks/render.py``).
+benchmarks/README.md's tables are re-rendered from them (``benchmarks/render_tables.py``).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
 
 import baselines  # noqa: E402
-import render  # noqa: E402
+import render_tables as render  # noqa: E402
 
 
 def test_committed_tables_equal_the_rendering_of_the_committed_results() -> None:
@@ -22,7 +22,7 @@ def test_committed_tables_equal_the_rendering_of_the_committed_results() -> None
     assert {p.name for p in expected} >= {"trackers.md", "scaling.md", "api.md", "README.md"}
     for path, text in expected.items():
         assert path.read_text(encoding="utf-8") == text, (
-            f"{path} differs from its results: run python benchmarks/render.py"
+            f"{path} differs from its results: run python benchmarks/render_tables.py"
         )
 
 

@@ -7,9 +7,10 @@ the interpreter running pytest, so a fresh venv needs no registered kernel).
 
 from __future__ import annotations
 
+import importlib.util
 import re
-import sys
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
@@ -22,9 +23,18 @@ ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
 DOCS = ROOT / "docs" / "examples"
 NOTEBOOKS = sorted(EXAMPLES.glob("*.ipynb"))
-sys.path.insert(0, str(EXAMPLES))
 
-import render  # noqa: E402  (examples/render.py)
+
+def _load_render() -> ModuleType:
+    """examples/render.py, by path (a unique module name: no clash on sys.path)."""
+    spec = importlib.util.spec_from_file_location("semwm_examples_render", EXAMPLES / "render.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+render = _load_render()
 
 
 @pytest.fixture(scope="module")
