@@ -20,6 +20,7 @@ The tuning (:func:`tuning_from_knowledge`) is fixed and written into the results
 
 from __future__ import annotations
 
+import argparse
 import datetime as dt
 import itertools
 import json
@@ -467,12 +468,47 @@ def fmt(value: Any, digits: int = 3) -> str:
     return str(value)
 
 
+BENCHMARKS = Path(__file__).resolve().parent
+RESULTS = BENCHMARKS / "results"
+"""The committed results (``NAME.json``, ``NAME.md``): written only with ``--update-results``."""
+OUT = BENCHMARKS / "out"
+"""Where a benchmark run writes by default (git-ignored)."""
+
+
+def add_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--update-results``: the flag every benchmark command takes."""
+    parser.add_argument(
+        "--update-results",
+        action="store_true",
+        help="write the committed benchmarks/results/ and re-render benchmarks/README.md "
+        "(default: write to benchmarks/out/, untracked)",
+    )
+
+
 def write_results(
-    directory: Path, name: str, doc: dict[str, Any], markdown: str, quick: bool
-) -> None:
-    """Write ``NAME[_quick].json`` and ``.md`` under ``directory`` and print the table."""
-    directory.mkdir(exist_ok=True)
+    directory: Path,
+    name: str,
+    doc: dict[str, Any],
+    markdown: str,
+    quick: bool,
+    *,
+    update_results: bool = False,
+) -> Path:
+    """Write ``NAME[_quick].json`` and ``.md`` and print the table; returns the folder.
+
+    The files go to :data:`OUT` (untracked) unless ``update_results``: then to
+    ``directory`` (the committed results, :data:`RESULTS`), and benchmarks/README.md
+    is re-rendered from the committed results (``benchmarks/render_tables.py``).
+    """
+    target = directory if update_results else OUT
+    target.mkdir(parents=True, exist_ok=True)
     suffix = "_quick" if quick else ""
-    (directory / f"{name}{suffix}.json").write_text(json.dumps(doc, indent=2) + "\n")
-    (directory / f"{name}{suffix}.md").write_text(markdown)
+    (target / f"{name}{suffix}.json").write_text(json.dumps(doc, indent=2) + "\n")
+    (target / f"{name}{suffix}.md").write_text(markdown)
     print(markdown)
+    print(f"wrote {target / name}{suffix}.json and .md")
+    if update_results:
+        import render_tables  # beside this file
+
+        render_tables.main([])
+    return target

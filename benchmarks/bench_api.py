@@ -1,6 +1,7 @@
 """Benchmark of the HTTP service: 5 robots streaming detections to a real server.
 
-Run: ``python benchmarks/bench_api.py [--knowledge knowledge/sim1.yaml] [--seconds 5]``
+Run: ``python benchmarks/bench_api.py [--knowledge knowledge/sim1.yaml] [--seconds 5]
+[--update-results]``
 
 The server runs as ``semwm serve`` in its own process (so clients and server do
 not share an interpreter lock) on a free loopback port. For each request size
@@ -13,14 +14,14 @@ not share an interpreter lock) on a free loopback port. For each request size
 
 Each robot reports its own static objects (one per detection of a request,
 1 m apart) with 2 cm Gaussian noise, at its wall-clock time. Prints a table and
-writes ``benchmarks/results/api.json`` with the machine it ran on.
+writes ``api.json`` and ``api.md`` (with the machine it ran on) to ``benchmarks/out/``
+(``benchmarks/results/`` with ``--update-results``).
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import os
 import platform
 import socket
@@ -34,6 +35,11 @@ from typing import Any
 
 import httpx
 import numpy as np
+from tqdm import tqdm
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from baselines import RESULTS, add_output_arguments, fmt, write_results
 
 ROBOTS = 5
 RATE_HZ = 30.0
@@ -154,35 +160,49 @@ def machine() -> dict[str, Any]:
     }
 
 
-def main() -> None:
+def markdown(doc: dict[str, Any]) -> str:
+    """The results as a markdown table (``api.md``, benchmarks/README.md)."""
+    m = doc["machine"]
+    lines = [
+        "# The HTTP service under load",
+        "",
+        f"{doc['robots']} robots, {doc['rate_hz']:g} Hz paced or as fast as possible, "
+        f"`{doc['knowledge']}`; server and clients on the same machine: {m['platform']}, "
+        f"{m['cpu_count']} CPUs ({m.get('processor') or '?'}), Python {m['python']}, "
+        f"{m['date']}, commit {m.get('commit')}.",
+        "",
+        "| mode | detections / request | requests/s | target requests/s | detections/s | "
+        "p50 ms | p99 ms | objects at end | statuses |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in doc["results"]:
+        statuses = ", ".join(f"{code}: {count}" for code, count in r["statuses"].items())
+        target = r["target_requests_per_s"] and round(r["target_requests_per_s"])
+        lines.append(
+            f"| {r['mode']} | {r['detections_per_request']} | {r['requests_per_s']:.0f} | "
+            f"{fmt(target)} | {r['detections_per_s']:.0f} | "
+            f"{r['latency_p50_ms']:.1f} | {r['latency_p99_ms']:.1f} | "
+            f"{r['objects_at_end']} | {statuses} |"
+        )
+    lines.append("")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--knowledge", type=Path, default=ROOT / "knowledge" / "sim1.yaml")
     parser.add_argument("--seconds", type=float, default=5.0, help="length of each phase")
-    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "api.json")
-    args = parser.parse_args()
+    add_output_arguments(parser)
+    args = parser.parse_args(argv)
     process, url = start_server(args.knowledge)
     rows = []
+    phases = [(size, paced) for size in SIZES for paced in (True, False)]
     try:
-        for size in SIZES:
-            for paced in (True, False):
-                rows.append(phase(url, size, args.seconds, paced))
-                print(f"  done: {rows[-1]['mode']} x{size}", file=sys.stderr)
+        for size, paced in tqdm(phases, desc="api phases", unit="phase"):
+            rows.append(phase(url, size, args.seconds, paced))
     finally:
         process.terminate()
         process.wait(10)
-    header = (
-        f"{'mode':6} {'det/req':>7} {'req/s':>8} {'target':>7} {'det/s':>9} "
-        f"{'p50 ms':>8} {'p99 ms':>8} {'objects':>8}  statuses"
-    )
-    print(header)
-    print("-" * len(header))
-    for r in rows:
-        target = f"{r['target_requests_per_s']:.0f}" if r["target_requests_per_s"] else "-"
-        print(
-            f"{r['mode']:6} {r['detections_per_request']:>7} {r['requests_per_s']:>8.1f} "
-            f"{target:>7} {r['detections_per_s']:>9.1f} {r['latency_p50_ms']:>8.2f} "
-            f"{r['latency_p99_ms']:>8.2f} {r['objects_at_end']:>8}  {r['statuses']}"
-        )
     report = {
         "benchmark": "api",
         "robots": ROBOTS,
@@ -195,9 +215,9 @@ def main() -> None:
         "machine": machine(),
         "results": rows,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    write_results(
+        RESULTS, "api", report, markdown(report), False, update_results=args.update_results
+    )
 
 
 if __name__ == "__main__":

@@ -16,7 +16,8 @@ order, so it is cumulative).
 Hypothesis budget: robocup (seed 0) with ``world.max_hypotheses`` = 1, 10, 100,
 1000: GOSPA, ID switches and wall time per detection (``run_scenario``).
 
-Writes ``benchmarks/results/scaling.json`` and ``scaling.md``.
+Writes ``scaling.json`` and ``scaling.md`` to ``benchmarks/out/`` (``benchmarks/results/``
+with ``--update-results``).
 
     python benchmarks/bench_scaling.py [--quick]
 """
@@ -35,7 +36,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baselines import fmt, machine_info, write_results
+from baselines import RESULTS, add_output_arguments, fmt, machine_info, write_results
+from tqdm import tqdm
 
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.model import Knowledge
@@ -44,7 +46,6 @@ from semwm.sim.runner import run_scenario, scans
 from semwm.sim.scenarios import make_scenario
 from semwm.world import WorldModel
 
-RESULTS = Path(__file__).resolve().parent / "results"
 SIZES = (10, 30, 50, 100, 200, 500)
 WARMUP = 20
 TIMED = 30
@@ -155,11 +156,13 @@ def run(quick: bool = False, size_limit: float = 60.0) -> dict[str, Any]:
         },
         "budget": {"scenario": "robocup", "seed": 0, "runs": []},
     }
+    bar = tqdm(total=len(sizes) + len(BUDGETS), desc="scaling", unit="run")
     for n in sizes:
         row = grid_size(n, size_limit=size_limit, warmup=warmup, timed=timed)
         doc["grid"]["sizes"].append(row)
         brief = {k: v for k, v in row.items() if k != "per_frame"}
-        print(f"grid N={n}: {brief}", flush=True)
+        bar.update()
+        tqdm.write(f"grid N={n}: {brief}")
     steady = [
         (r["n"], r["steady_cpu_ms_per_frame"])
         for r in doc["grid"]["sizes"]
@@ -172,7 +175,9 @@ def run(quick: bool = False, size_limit: float = 60.0) -> dict[str, Any]:
     for n_hyp in BUDGETS:
         row = budget(n_hyp, duration=duration)
         doc["budget"]["runs"].append(row)
-        print(f"budget {n_hyp}: {row}", flush=True)
+        bar.update()
+        tqdm.write(f"budget {n_hyp}: {row}")
+    bar.close()
     return doc
 
 
@@ -234,9 +239,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--size-limit", type=float, default=60.0)
+    add_output_arguments(parser)
     args = parser.parse_args(argv)
     doc = run(quick=args.quick, size_limit=args.size_limit)
-    write_results(RESULTS, "scaling", doc, markdown(doc), args.quick)
+    write_results(
+        RESULTS, "scaling", doc, markdown(doc), args.quick, update_results=args.update_results
+    )
     return doc
 
 

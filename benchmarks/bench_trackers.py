@@ -4,9 +4,10 @@ Every tracker runs through :func:`semwm.sim.runner.run_scenario` (same scans, sa
 truth times, same :mod:`semwm.sim.metrics`); wall time per detection is the
 runner's (ingest calls only, ``time.perf_counter``); peak memory is measured in a
 separate run of seed 0 under ``tracemalloc`` (so that tracing does not distort the
-timings). Writes ``benchmarks/results/trackers.json`` and ``trackers.md``.
+timings). Writes ``trackers.json`` and ``trackers.md`` to ``benchmarks/out/``
+(``benchmarks/results/`` with ``--update-results``).
 
-    python benchmarks/bench_trackers.py [--quick]
+    python benchmarks/bench_trackers.py [--quick] [--update-results]
 """
 
 from __future__ import annotations
@@ -24,21 +25,23 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from baselines import (
+    RESULTS,
     FilterPyNN,
     StoneSoupTracker,
     TrackerTimeout,
+    add_output_arguments,
     fmt,
     machine_info,
     tuning_from_knowledge,
     write_results,
 )
+from tqdm import tqdm
 
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.sim.runner import run_scenario
 from semwm.sim.scenarios import make_scenario
 
-RESULTS = Path(__file__).resolve().parent / "results"
 TRACKERS = ("semwm", "stonesoup_gnn", "stonesoup_jpda", "filterpy_nn")
 # scenario -> (sizes, scan rate of one source in Hz)
 FULL: dict[str, tuple[dict[str, Any], float]] = {
@@ -130,6 +133,7 @@ def run(
             "Peers use a constant-velocity model for every scenario (also static sim1).",
         ],
     }
+    bar = tqdm(total=len(config) * len(trackers) * len(seeds), desc="trackers", unit="run")
     for name, (sizes, rate) in config.items():
         scenario0 = make_scenario(name, 0, **sizes)
         knowledge = load_knowledge(shipped_knowledge_path(scenario0.knowledge_file))
@@ -153,7 +157,8 @@ def run(
                 )
                 row["seed"] = seed
                 rows.append(row)
-                print(f"{name:8s} {tracker:15s} seed {seed}: {row}", flush=True)
+                bar.update()
+                tqdm.write(f"{name:8s} {tracker:15s} seed {seed}: {row}")
             mem = run_one(
                 scenario0, knowledge, tracker, tuning, memory=True, time_limit=time_limit * 2
             )
@@ -180,6 +185,7 @@ def run(
             ratios[peer] = r
         entry["ratios_semwm_over_peer"] = ratios
         doc["scenarios"][name] = entry
+    bar.close()
     return doc
 
 
@@ -244,9 +250,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         default=120.0,
         help="per peer run, wall seconds, before 'timeout'",
     )
+    add_output_arguments(parser)
     args = parser.parse_args(argv)
     doc = run(quick=args.quick, time_limit=args.time_limit)
-    write_results(RESULTS, "trackers", doc, markdown(doc), args.quick)
+    write_results(
+        RESULTS, "trackers", doc, markdown(doc), args.quick, update_results=args.update_results
+    )
     return doc
 
 

@@ -163,13 +163,15 @@ def run_scenario(
     return RunResult(scenario, knowledge, worlds, metrics, seconds, sizes)
 
 
-def metrics_document(result: RunResult) -> dict[str, object]:
-    """What ``metrics.json`` holds."""
+def metrics_document(result: RunResult, ablations: Sequence[str] = ()) -> dict[str, object]:
+    """What ``metrics.json`` holds: the run's settings (scenario, seed, knowledge
+    file, the knowledge ablations applied to it) and its metrics."""
     scenario = result.scenario
     return {
         "scenario": scenario.name,
         "seed": scenario.seed,
         "knowledge": result.knowledge.source or scenario.knowledge_file,
+        "ablations": list(ablations),
         "duration": scenario.duration,
         "n_detections": result.n_detections,
         "n_scans": len(result.scan_sizes),
@@ -181,9 +183,13 @@ def _object_dict(obj: WorldObject) -> dict[str, object]:
     return obj.to_dict()
 
 
-def write_run(result: RunResult, out_dir: str | Path) -> Path:
-    """Write the run's files into ``out_dir`` (created if needed); returns it."""
-    from semwm.sim.plot import plot_run
+def write_run(result: RunResult, out_dir: str | Path, *, ablations: Sequence[str] = ()) -> Path:
+    """Write the run's files into ``out_dir`` (created if needed); returns it.
+
+    ``ablations``: the names of the knowledge ablations the run's knowledge had
+    (recorded in ``metrics.json``).
+    """
+    from semwm.sim.plot import plot_run  # matplotlib only when a run is written
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -197,7 +203,7 @@ def write_run(result: RunResult, out_dir: str | Path) -> Path:
         for frame, state in zip(result.scenario.truth, result.worlds, strict=True):
             objects = [_object_dict(o) for o in state.objects]
             f.write(json.dumps({"time": frame.time, "objects": objects}) + "\n")
-    document = metrics_document(result)
+    document = metrics_document(result, ablations)
     (out / "metrics.json").write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    plot_run(result, out / "plot.png")
+    plot_run(result.scenario, result.worlds, result.metrics, out / "plot.png")
     return out

@@ -169,4 +169,4 @@ def test_semwm_serve_without_knowledge_fails_clearly(tmp_path: Path) -> None:
     command = [sys.executable, "-m", "semwm.cli", "serve", "--knowledge", str(missing)]
     result = subprocess.run(command, env=env, capture_output=True, text=True, timeout=30)
     assert result.returncode == 2
-    assert "nope.yaml: no such file" in result.stdout
+    assert result.stderr.strip().endswith("nope.yaml: no such file")

@@ -1,43 +1,46 @@
-"""Execute every example notebook (examples/*.ipynb) and fail on any cell error.
+"""Execute every example notebook (examples/*.ipynb) and fail on any cell error;
+every notebook is published with its outputs in docs/examples/.
 
-The kernel is pinned to the interpreter running pytest: a temporary kernelspec
-``python3`` whose argv is ``sys.executable -m ipykernel_launcher`` is put first on
-``JUPYTER_PATH``, so a fresh venv (CI) needs no globally registered kernel.
+Notebooks run as ``python examples/render.py`` runs them (its ``pinned_kernel``:
+the interpreter running pytest, so a fresh venv needs no registered kernel).
 """
 
 from __future__ import annotations
 
-import json
-import sys
+import importlib.util
+import re
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
-nbformat = pytest.importorskip("nbformat")
-nbclient = pytest.importorskip("nbclient")
+pytest.importorskip("nbformat")
+pytest.importorskip("nbclient")
 pytest.importorskip("ipykernel")
 pytest.importorskip("matplotlib")
 
-EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "examples"
+DOCS = ROOT / "docs" / "examples"
 NOTEBOOKS = sorted(EXAMPLES.glob("*.ipynb"))
 
 
+def _load_render() -> ModuleType:
+    """examples/render.py, by path (a unique module name: no clash on sys.path)."""
+    spec = importlib.util.spec_from_file_location("semwm_examples_render", EXAMPLES / "render.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+render = _load_render()
+
+
 @pytest.fixture(scope="module")
-def kernel_here(tmp_path_factory: pytest.TempPathFactory) -> str:
-    """A ``python3`` kernelspec running ``sys.executable``, first on JUPYTER_PATH."""
-    root = tmp_path_factory.mktemp("jupyter")
-    spec_dir = root / "kernels" / "python3"
-    spec_dir.mkdir(parents=True)
-    spec = {
-        "argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
-        "display_name": "Python 3 (pytest)",
-        "language": "python",
-    }
-    (spec_dir / "kernel.json").write_text(json.dumps(spec), encoding="utf-8")
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("JUPYTER_PATH", str(root))
-        mp.setenv("MPLBACKEND", "Agg")
-        yield "python3"
+def kernel_here() -> str:
+    with render.pinned_kernel() as name:
+        yield name
 
 
 def test_examples_exist() -> None:
@@ -46,14 +49,7 @@ def test_examples_exist() -> None:
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
 def test_notebook_runs(path: Path, kernel_here: str) -> None:
-    nb = nbformat.read(path, as_version=4)
-    client = nbclient.NotebookClient(
-        nb,
-        timeout=120,
-        kernel_name=kernel_here,
-        resources={"metadata": {"path": str(EXAMPLES)}},
-    )
-    client.execute()  # raises CellExecutionError on the first failing cell
+    nb = render.execute(path, kernel_here)  # raises CellExecutionError on the first failing cell
     errors = [
         out
         for cell in nb.cells
@@ -62,3 +58,22 @@ def test_notebook_runs(path: Path, kernel_here: str) -> None:
         if out.get("output_type") == "error"
     ]
     assert not errors
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
+def test_notebook_is_published_with_its_figures(path: Path) -> None:
+    page = DOCS / f"{path.stem}.md"
+    assert page.is_file(), f"{page} missing: run python examples/render.py"
+    text = page.read_text(encoding="utf-8")
+    figures = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", text)
+    assert figures, f"{page} has no figure"
+    for figure in figures:
+        assert (DOCS / figure).is_file(), figure
+
+
+def test_committed_notebooks_carry_no_outputs() -> None:
+    import nbformat
+
+    for path in NOTEBOOKS:
+        nb = nbformat.read(path, as_version=4)
+        assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), path

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import argparse
-
 import pytest
 
+from semwm.cli.common import Parser
+from semwm.cli.simulate import add_simulate_command
 from semwm.knowledge.loader import load_document
 from semwm.knowledge.resolve import resolve
 from semwm.knowledge.shipped import shipped_knowledge_path
-from semwm.sim.cli import add_simulate_command, without_appearance_relations, without_taxonomy
+from semwm.sim.ablations import ablate, without_appearance_relations, without_taxonomy
 from semwm.sim.runner import taxonomy_of
 
 
@@ -38,7 +38,7 @@ def test_without_taxonomy_keeps_inherited_settings_but_no_is_a() -> None:
 
 
 def test_simulate_arguments() -> None:
-    parser = argparse.ArgumentParser()
+    parser = Parser()
     add_simulate_command(parser.add_subparsers())
     args = parser.parse_args(
         ["simulate", "sim2", "--seed", "3", "--no-knowledge", "door-relation", "--no-progress"]
@@ -52,3 +52,11 @@ def test_simulate_arguments() -> None:
     assert args.out is None and args.duration is None
     with pytest.raises(SystemExit):
         parser.parse_args(["simulate", "sim2", "--no-knowledge", "everything"])
+
+
+def test_ablate_applies_each_name_and_rejects_unknown_ones() -> None:
+    document = load_document(shipped_knowledge_path("sim2.yaml"))
+    assert ablate(document, ["door-relation"]) == without_appearance_relations(document)
+    assert ablate(document, []) == document
+    with pytest.raises(KeyError, match="unknown ablation 'doors'; known: door-relation, taxonomy"):
+        ablate(document, ["doors"])

@@ -16,7 +16,7 @@ import pytest
 from semwm.knowledge.loader import load_document
 from semwm.knowledge.resolve import resolve
 from semwm.knowledge.shipped import shipped_knowledge_path
-from semwm.sim.cli import without_appearance_relations
+from semwm.sim.ablations import without_appearance_relations
 from semwm.sim.runner import RunResult, run_scenario
 from semwm.sim.scenarios import Scenario, make_scenario
 from semwm.world_types import WorldObject

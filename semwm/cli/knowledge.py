@@ -11,9 +11,17 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable, Iterator
-from typing import Any
+from collections.abc import Iterator
+from pathlib import Path
 
+from semwm.cli.common import (
+    EXIT_INVALID,
+    EXIT_OK,
+    EXIT_USAGE,
+    CommandError,
+    Subparsers,
+    description,
+)
 from semwm.knowledge.loader import (
     UnknownFormatError,
     analyse_file,
@@ -25,21 +33,18 @@ from semwm.knowledge.model import IMMFilterSpec, Knowledge, Matrix, ResolvedClas
 from semwm.knowledge.problems import KnowledgeError
 from semwm.knowledge.resolve import INHERITED_FIELDS
 
-EXIT_OK = 0
-EXIT_INVALID = 1
-EXIT_USAGE = 2
 
-Command = Callable[[argparse.Namespace], int]
-
-
-def add_knowledge_commands(subparsers: Any) -> None:
+def add_knowledge_command(subparsers: Subparsers) -> None:
     """Add ``knowledge validate|convert|show`` to a top-level parser's subparsers.
 
     Each command parser sets ``func``, a function of the parsed arguments returning
     the exit status.
     """
     knowledge = subparsers.add_parser(
-        "knowledge", help="validate, convert and show knowledge files (XML or YAML)"
+        "knowledge",
+        help="validate, convert and show knowledge files (XML or YAML)",
+        description=description(__doc__),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     commands = knowledge.add_subparsers(dest="knowledge_command", metavar="COMMAND", required=True)
 
@@ -47,7 +52,12 @@ def add_knowledge_commands(subparsers: Any) -> None:
     validate.add_argument("files", nargs="+", metavar="FILE")
     validate.set_defaults(func=validate_command)
 
-    convert = commands.add_parser("convert", help="convert between XML and YAML (by extension)")
+    convert = commands.add_parser(
+        "convert",
+        help="convert between XML and YAML (by extension)",
+        description="Convert a knowledge file between XML and YAML, chosen by the extensions "
+        "(.xml, .yaml, .yml). OUT's folder must exist.",
+    )
     convert.add_argument("source", metavar="IN")
     convert.add_argument("target", metavar="OUT")
     convert.set_defaults(func=convert_command)
@@ -100,7 +110,14 @@ def _report(error: Exception) -> int:
 
 
 def convert_command(args: argparse.Namespace) -> int:
-    """Read ``IN`` and write the same document to ``OUT`` in the other format."""
+    """Read ``IN`` and write the same document to ``OUT`` in the other format.
+
+    ``OUT``'s folder must exist (a typo in it is not silently created): else a
+    :class:`CommandError` names it, and nothing is written.
+    """
+    folder = Path(args.target).parent
+    if not folder.is_dir():
+        raise CommandError(f"cannot write {args.target}: no such folder {folder}/", EXIT_INVALID)
     try:
         document = load_document(args.source)
         dump_document(document, args.target)

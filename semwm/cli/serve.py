@@ -1,22 +1,27 @@
-"""``semwm serve``: run the HTTP service with uvicorn."""
+"""``semwm serve``: run the HTTP service with uvicorn.
+
+The service (``api``) is imported inside the command, so importing the command
+line (or the core) does not import FastAPI.
+"""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
 
 from pydantic import ValidationError
 
+from semwm.cli.common import EXIT_USAGE, LOG_LEVELS, CommandError, Subparsers
 
-def add_serve_command(subparsers: Any) -> argparse.ArgumentParser:
+
+def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
     """Add ``serve`` to the ``semwm`` command's sub-commands."""
     parser: argparse.ArgumentParser = subparsers.add_parser(
         "serve",
         help="run the HTTP service",
-        description="Run the semwm HTTP service. Every option can also be set from the "
-        "environment: SEMWM_KNOWLEDGE, SEMWM_HOST, SEMWM_PORT, SEMWM_REORDER_WINDOW, "
-        "SEMWM_MAX_BATCH, SEMWM_WRITE_BACK.",
+        description="Run the semwm HTTP service (OpenAPI at /docs). Every option can also be "
+        "set from the environment: SEMWM_KNOWLEDGE, SEMWM_HOST, SEMWM_PORT, "
+        "SEMWM_REORDER_WINDOW, SEMWM_MAX_BATCH, SEMWM_WRITE_BACK.",
     )
     parser.add_argument("--knowledge", type=Path, help="knowledge file (YAML or XML)")
     parser.add_argument("--host", help="address to bind (default 127.0.0.1)")
@@ -29,7 +34,13 @@ def add_serve_command(subparsers: Any) -> argparse.ArgumentParser:
         default=None,
         help="write accepted class edits back to the knowledge file",
     )
-    parser.add_argument("--log-level", default="info", help="uvicorn log level")
+    parser.add_argument(
+        "--log-level",
+        dest="serve_log_level",
+        choices=LOG_LEVELS,
+        default=None,
+        help="server log level (default: semwm --log-level, else info)",
+    )
     parser.set_defaults(func=run_serve)
     return parser
 
@@ -49,31 +60,14 @@ def run_serve(args: argparse.Namespace) -> int:
     try:
         settings = Settings(**given)
     except ValidationError as error:
-        for problem in error.errors():
-            field = ".".join(map(str, problem["loc"]))
-            print(f"semwm serve: {field}: {problem['msg']}")
-        return 2
+        problems = "; ".join(
+            f"{'.'.join(map(str, problem['loc']))}: {problem['msg']}" for problem in error.errors()
+        )
+        raise CommandError(problems, EXIT_USAGE) from None
     if settings.knowledge is None:
-        print("semwm serve: no knowledge file: pass --knowledge FILE or set SEMWM_KNOWLEDGE")
-        return 2
+        raise CommandError("no knowledge file: pass --knowledge FILE or set SEMWM_KNOWLEDGE")
     if not settings.knowledge.is_file():
-        print(f"semwm serve: {settings.knowledge}: no such file")
-        return 2
-    uvicorn.run(
-        create_app(settings), host=settings.host, port=settings.port, log_level=args.log_level
-    )
+        raise CommandError(f"{settings.knowledge}: no such file")
+    log_level = args.serve_log_level or getattr(args, "log_level", None) or "info"
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=log_level)
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m api.cli serve ...``: the command without the rest of ``semwm``."""
-    parser = argparse.ArgumentParser(prog="semwm")
-    commands = parser.add_subparsers(dest="command", required=True)
-    add_serve_command(commands)
-    args = parser.parse_args(argv)
-    result: int = args.func(args)
-    return result
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

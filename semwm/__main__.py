@@ -1,0 +1,5 @@
+"""``python -m semwm ...`` is ``semwm ...``."""
+
+from semwm.cli import main
+
+raise SystemExit(main())

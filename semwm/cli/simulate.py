@@ -1,0 +1,178 @@
+"""``semwm simulate NAME``: run a scenario through the world model, print and write metrics.
+
+Writes ``detections.jsonl``, ``truth.jsonl``, ``world.jsonl``, ``metrics.json`` and
+``plot.png`` into ``--out`` (default ``runs/NAME-seedN``, with ``-no-ABLATION`` for
+each ``--no-knowledge`` and ``-knowledge-STEM`` for ``--knowledge FILE``, so a
+variant never overwrites the baseline). ``metrics.json`` records the knowledge
+file and the ablations.
+
+The knowledge is the scenario's shipped file (``sim2`` -> ``sim2.yaml``), read
+from the checkout's ``knowledge/`` when run inside a semwm checkout (so edits
+there take effect), else from the installed package; ``--knowledge FILE`` uses
+any file instead.
+
+Knowledge ablations (``--no-knowledge``) change the knowledge before the run, to
+measure what a piece of knowledge is worth:
+
+* ``door-relation``: remove every class's appearance relations (paper 002 eq. 4;
+  in ``sim2`` "a Person appears near a Door"), leaving the base rates;
+* ``taxonomy``: remove every is-a relation, each class keeping the settings it
+  inherited (paper 002 eq. 8: ``Can`` then no longer matches ``CokeCan``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from semwm.cli.common import (
+    EXIT_INVALID,
+    CommandError,
+    Subparsers,
+    description,
+    positive_float,
+)
+from semwm.knowledge.loader import UnknownFormatError, load_document
+from semwm.knowledge.model import KnowledgeDocument
+from semwm.knowledge.problems import KnowledgeError
+from semwm.knowledge.resolve import resolve
+from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.sim.ablations import ABLATIONS, ablate
+from semwm.sim.metrics import Metrics
+from semwm.sim.runner import run_scenario, write_run
+from semwm.sim.scenarios import SCENARIOS, make_scenario
+
+
+def format_summary(metrics: Metrics, n_detections: int) -> str:
+    """The metrics as a small two-column table."""
+    g = metrics.gospa
+    accuracy = metrics.class_accuracy
+
+    def pct(value: float | None) -> str:
+        return "n/a" if value is None else f"{100.0 * value:.1f} %"
+
+    rows = [
+        (f"GOSPA (c={g.c:g}, p={g.p:g}, alpha=2)", f"{g.total:.3f}"),
+        ("  localisation", f"{g.localisation:.3f}"),
+        ("  missed", f"{g.missed:.3f}"),
+        ("  false", f"{g.false:.3f}"),
+        ("ID switches", str(metrics.id_switches)),
+        (
+            "false objects (mean/frame, total)",
+            f"{metrics.false_objects.mean:.3f}, {metrics.false_objects.total}",
+        ),
+        (
+            "missed objects (mean/frame, total)",
+            f"{metrics.missed_objects.mean:.3f}, {metrics.missed_objects.total}",
+        ),
+        ("class accuracy (exact)", pct(accuracy.exact)),
+        ("class accuracy (taxonomy)", pct(accuracy.compatible)),
+        ("time per detection", f"{1e3 * metrics.time_per_detection.get('mean_s', 0.0):.3f} ms"),
+        ("detections / truth frames", f"{n_detections} / {metrics.n_frames}"),
+    ]
+    width = max(len(name) for name, _ in rows)
+    return "\n".join(f"{name:<{width}}  {value}" for name, value in rows)
+
+
+def default_out(name: str, seed: int, ablations: list[str], knowledge: Path | None) -> Path:
+    """``runs/NAME-seedN[-knowledge-STEM][-no-ABLATION...]``: one folder per variant."""
+    parts = [f"{name}-seed{seed}"]
+    if knowledge is not None:
+        parts.append(f"knowledge-{knowledge.stem}")
+    parts += [f"no-{ablation}" for ablation in ablations]
+    return Path("runs") / "-".join(parts)
+
+
+def _load(path: Path) -> KnowledgeDocument:
+    """The document in ``path``; else a :class:`CommandError` with its first problem."""
+    try:
+        return load_document(path)
+    except KnowledgeError as error:
+        first, count = str(error.problems[0]), len(error.problems)
+        more = f" (and {count - 1} more: semwm knowledge validate {path})" if count > 1 else ""
+        raise CommandError(first + more, EXIT_INVALID) from None
+    except UnknownFormatError as error:
+        raise CommandError(str(error), EXIT_INVALID) from None
+    except OSError as error:
+        raise CommandError(f"{path}: {error.strerror or error}", EXIT_INVALID) from None
+
+
+def simulate(args: argparse.Namespace) -> int:
+    """Run ``semwm simulate``; returns the exit status."""
+    sizes: dict[str, Any] = {}
+    if args.duration is not None:
+        if args.name == "sim2":
+            print(
+                "semwm simulate: sim2's duration is set by the person's walk; --duration ignored",
+                file=sys.stderr,
+            )
+        else:
+            sizes["duration"] = args.duration
+    scenario = make_scenario(args.name, args.seed, **sizes)
+    path = args.knowledge or shipped_knowledge_path(scenario.knowledge_file)
+    ablations = list(dict.fromkeys(args.no_knowledge))  # each once, in the order given
+    document = ablate(_load(path), ablations)
+    try:
+        knowledge = resolve(document, source=str(path))
+    except KnowledgeError as error:
+        raise CommandError(str(error.problems[0]), EXIT_INVALID) from None
+    out = args.out or default_out(args.name, args.seed, ablations, args.knowledge)
+    if out.exists() and not out.is_dir():
+        raise CommandError(f"--out {out}: exists and is not a folder")
+    result = run_scenario(scenario, knowledge, progress=not args.no_progress)
+    write_run(result, out, ablations=ablations)
+    ablated = f" without {', '.join(ablations)}" if ablations else ""
+    print(f"{args.name} (seed {args.seed}){ablated}, knowledge {path}: wrote {out}")
+    print(format_summary(result.metrics, result.n_detections))
+    return 0
+
+
+def add_simulate_command(subparsers: Subparsers) -> argparse.ArgumentParser:
+    """Add ``simulate`` to the ``semwm`` command line's sub-parsers."""
+    parser: argparse.ArgumentParser = subparsers.add_parser(
+        "simulate",
+        help="run a simulated scenario through the world model and report metrics",
+        description=description(__doc__),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "name",
+        metavar="NAME",
+        choices=sorted(SCENARIOS),
+        help="scenario: " + ", ".join(sorted(SCENARIOS)),
+    )
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument(
+        "--knowledge",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="knowledge file (XML or YAML; default: the scenario's shipped file)",
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="output folder (default runs/NAME-seedN, plus -knowledge-STEM, -no-ABLATION)",
+    )
+    parser.add_argument(
+        "--no-knowledge",
+        action="append",
+        default=[],
+        choices=sorted(ABLATIONS),
+        metavar="NAME",
+        help="remove a piece of knowledge (repeatable): " + ", ".join(sorted(ABLATIONS)),
+    )
+    parser.add_argument(
+        "--duration",
+        type=positive_float,
+        default=None,
+        metavar="SECONDS",
+        help="scenario duration in s (sim1, robocup)",
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.set_defaults(func=simulate)
+    return parser

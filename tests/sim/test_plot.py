@@ -1,0 +1,92 @@
+"""The run plot: labelled (classes, ids, axes with units, a legend entry per series)
+and readable at RoboCup scale (detections subsampled, one line per world id)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from semwm.knowledge.loader import load_knowledge
+from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.sim import plot
+from semwm.sim.plot import (
+    draw_run,
+    plot_run,
+    truth_paths,
+    world_tracks,
+)
+from semwm.sim.runner import RunResult, run_scenario
+from semwm.sim.scenarios import make_scenario
+
+
+def _run(name: str, **sizes: float) -> RunResult:
+    scenario = make_scenario(name, 0, **sizes)
+    knowledge = load_knowledge(shipped_knowledge_path(scenario.knowledge_file))
+    return run_scenario(scenario, knowledge, progress=False)
+
+
+@pytest.fixture(scope="module")
+def sim1() -> RunResult:
+    return _run("sim1", duration=4.0)
+
+
+def _texts(result: RunResult) -> tuple[list[str], list[str], str, str]:
+    fig = draw_run(result.scenario, result.worlds, result.metrics)
+    try:
+        ax = fig.axes[0]
+        legend = [t.get_text() for t in ax.get_legend().get_texts()]
+        notes = [t.get_text() for t in ax.texts]
+        return legend, notes, ax.get_xlabel(), ax.get_ylabel()
+    finally:
+        plt.close(fig)
+
+
+def test_sim1_plot_names_classes_ids_and_marks_static_truth(sim1: RunResult) -> None:
+    legend, notes, xlabel, ylabel = _texts(sim1)
+    assert (xlabel, ylabel) == ("x [m]", "y [m]")
+    truth_classes = {o.cls for o in sim1.scenario.truth[0].objects}
+    world = sim1.worlds[-1].objects
+    for cls in truth_classes:
+        assert f"truth: static {cls}" in legend
+    for obj in world:
+        assert f"world: {obj.cls} track (#id at its last point in view)" in legend
+        assert f"#{obj.id} {obj.label or obj.cls}" in notes
+    for o in sim1.scenario.truth[0].objects:
+        assert f"{o.label or o.id} ({o.cls})" in notes
+    assert legend[0] == f"detections ({len(sim1.scenario.detections)})"
+
+
+def test_truth_paths_tell_static_from_moving() -> None:
+    assert all(p.static for p in truth_paths(make_scenario("sim1", 0, duration=2.0)))
+    assert not any(p.static for p in truth_paths(make_scenario("sim2", 0)))
+
+
+def test_world_tracks_one_per_id_with_its_last_class(sim1: RunResult) -> None:
+    tracks = world_tracks(sim1.scenario, sim1.worlds)
+    ids = {o.id for w in sim1.worlds for o in w.objects}
+    assert set(tracks) == ids
+    last = {o.id: o.cls for w in sim1.worlds for o in w.objects}
+    for track_id, track in tracks.items():
+        assert track.cls == last[track_id]
+        counts = sum(any(o.id == track_id for o in w.objects) for w in sim1.worlds)
+        assert track.rows.shape == (counts, 3)
+        assert np.all(np.diff(track.rows[:, 0]) > 0)
+
+
+def test_robocup_detections_are_subsampled_and_every_class_has_a_legend_entry(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    result = _run("robocup", duration=1.0)  # 10 s would have ~5000 detections; 1 s and a cap of 100
+    monkeypatch.setattr(plot, "MAX_DETECTIONS_DRAWN", 100)
+    n = len(result.scenario.detections)
+    step = int(np.ceil(n / 100))
+    assert step > 1
+    legend, _, _, _ = _texts(result)
+    assert legend[0] == f"detections (every {step}th of {n})"
+    for cls in {o.cls for f in result.scenario.truth for o in f.objects}:
+        assert f"truth: {cls} path (square: start)" in legend
+    path = plot_run(result.scenario, result.worlds, result.metrics, tmp_path / "plot.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
