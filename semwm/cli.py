@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 from api.cli import add_serve_command
 from semwm.cli_knowledge import add_knowledge_commands
+from semwm.persistence.cli import add_journal_command, add_record_command, add_replay_command
 from semwm.sim.cli import add_simulate_command
 
 
@@ -16,6 +17,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_knowledge_commands(subparsers)
     add_serve_command(subparsers)
     add_simulate_command(subparsers)
+    add_replay_command(subparsers)
+    add_record_command(subparsers)
+    add_journal_command(subparsers)
     return parser
 
 
