@@ -10,10 +10,10 @@ detection acknowledged before it, none half-applied). Domain errors become
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 from api.errors import ConflictError, InvalidError, KnowledgeFileError, Loc, NotFoundError
 from semwm import IngestResult, WorldModel, load_knowledge
@@ -21,6 +21,8 @@ from semwm.detection import DetectionError, DetectionProblem, OutOfOrderError
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
 from semwm.persistence.records import Record, batch_record, knowledge_record, reset_record
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
+
+T = TypeVar("T")
 
 
 def known_list(names: Sequence[str]) -> str:
@@ -196,12 +198,13 @@ class WorldService:
             self._model.reset()
             return self._model.latest_time
 
-    def digest(self) -> str:
-        """The digest of the world published now (:func:`semwm.persistence.model_digest`)."""
+    def digest(self, also: Callable[[], T] | None = None) -> tuple[str, T | None]:
+        """The digest of the world published now (:func:`semwm.persistence.model_digest`),
+        and ``also()`` called under the same lock (a consistent view of both)."""
         from semwm.persistence.replay import model_digest
 
         with self._lock:
-            return model_digest(self._model)
+            return model_digest(self._model), also() if also is not None else None
 
     # -- knowledge ----------------------------------------------------------------------------
 

@@ -18,4 +18,5 @@ def get_persistence(world: WorldDep, request: Request) -> dict[str, Any]:
     ids, classes, positions, covariances); ``journal``: the data directory's state
     (records, snapshot, archives, what the last start recovered), ``null`` without
     ``--data-dir``."""
-    return {"digest": world.digest(), "journal": persistence_status(request.app)}
+    digest, journal = world.digest(lambda: persistence_status(request.app))
+    return {"digest": digest, "journal": journal}
