@@ -17,7 +17,8 @@ from pydantic import BaseModel
 
 from api.deps import get_world
 from api.errors import install_error_handlers
-from api.routes import detections, knowledge, system, world
+from api.persistence import attach_persistence
+from api.routes import detections, knowledge, persistence, system, world
 from api.schemas import DetectionBatch, DetectionIn
 from api.service import WorldService
 from api.settings import Settings
@@ -53,12 +54,13 @@ def create_app(settings: Settings) -> FastAPI:
                 write_back=settings.write_back,
             )
             logger.info("world model built from %s", settings.knowledge)
-        yield
+        with attach_persistence(app, settings):
+            yield
 
     app = FastAPI(title="semwm", version="0.1.0", description=DESCRIPTION, lifespan=lifespan)
     app.state.settings = settings
     install_error_handlers(app)
-    for module in (detections, world, knowledge, system):
+    for module in (detections, world, knowledge, system, persistence):
         app.include_router(module.router)
 
     def openapi() -> dict[str, Any]:

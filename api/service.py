@@ -10,15 +10,19 @@ detection acknowledged before it, none half-applied). Domain errors become
 from __future__ import annotations
 
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import AbstractContextManager, ExitStack, contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 from api.errors import ConflictError, InvalidError, KnowledgeFileError, Loc, NotFoundError
 from semwm import IngestResult, WorldModel, load_knowledge
 from semwm.detection import DetectionError, DetectionProblem, OutOfOrderError
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
+from semwm.persistence.records import Record, batch_record, knowledge_record, reset_record
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
+
+T = TypeVar("T")
 
 
 def known_list(names: Sequence[str]) -> str:
@@ -48,6 +52,14 @@ def problems_to_items(
     return items
 
 
+class ChangeHook(Protocol):
+    """Told of every change around its application (journal, recorder)."""
+
+    def applying(self, record: Record) -> AbstractContextManager[None]:
+        """Wraps the code that applies ``record``; the body raising means it was refused."""
+        ...
+
+
 class WorldService:
     """A :class:`WorldModel` shared by every request, with its knowledge file.
 
@@ -69,6 +81,25 @@ class WorldService:
         self._lock = threading.Lock()
         self.knowledge_path = knowledge_path
         self.write_back = write_back
+        self.hooks: list[ChangeHook] = []
+
+    def use_model(self, model: WorldModel) -> None:
+        """Serve ``model`` from now on (the one a data directory restored)."""
+        with self._lock:
+            self._model = model
+
+    @property
+    def model(self) -> WorldModel:
+        """The world model, without the lock: for hooks, which run with it held."""
+        return self._model
+
+    @contextmanager
+    def _change(self, record: Record) -> Iterator[None]:
+        """Apply a change inside every hook's ``applying`` (call with the lock held)."""
+        with ExitStack() as stack:
+            for hook in self.hooks:
+                stack.enter_context(hook.applying(record))
+            yield
 
     @classmethod
     def from_file(
@@ -85,7 +116,8 @@ class WorldService:
         """Apply ``detections`` whole, or raise :class:`InvalidError`/:class:`ConflictError`."""
         with self._lock:
             try:
-                result = self._model.ingest(list(detections))
+                with self._change(batch_record(detections)):
+                    result = self._model.ingest(list(detections))
             except DetectionError as error:
                 raise InvalidError(problems_to_items(error.problems, batch)) from error
             except OutOfOrderError as error:
@@ -162,9 +194,17 @@ class WorldService:
             }
 
     def reset(self) -> float | None:
-        with self._lock:
+        with self._lock, self._change(reset_record()):
             self._model.reset()
             return self._model.latest_time
+
+    def digest(self, also: Callable[[], T] | None = None) -> tuple[str, T | None]:
+        """The digest of the world published now (:func:`semwm.persistence.model_digest`),
+        and ``also()`` called under the same lock (a consistent view of both)."""
+        from semwm.persistence.replay import model_digest
+
+        with self._lock:
+            return model_digest(self._model), also() if also is not None else None
 
     # -- knowledge ----------------------------------------------------------------------------
 
@@ -215,7 +255,8 @@ class WorldService:
                     [_knowledge_item(p.path, p.message, where) for p in error.problems]
                 ) from error
             try:
-                self._model.replace_knowledge(knowledge)
+                with self._change(knowledge_record(knowledge)):
+                    self._model.replace_knowledge(knowledge)
             except ValueError as error:
                 raise ConflictError(
                     f"the edit conflicts with the tracked objects: {error}"
@@ -247,7 +288,8 @@ class WorldService:
             ) from error
         with self._lock:
             try:
-                self._model.replace_knowledge(knowledge)
+                with self._change(knowledge_record(knowledge)):
+                    self._model.replace_knowledge(knowledge)
             except ValueError as error:
                 raise ConflictError(
                     f"the reloaded knowledge conflicts with the tracked objects: {error}"

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -30,6 +30,14 @@ class Settings(BaseSettings):
     write_back
         Write accepted ``PUT /knowledge/classes/{name}`` edits back to the knowledge
         file (atomically).
+    data_dir, sync, snapshot_every, compact_every
+        Persistence (docs/persistence.md): journal every accepted change in
+        ``data_dir`` and restore the world from it on start; ``always`` commits
+        with an fsync before answering, ``batch`` without (a power loss can lose
+        the last commits); a snapshot every ``snapshot_every`` records; records
+        beyond ``compact_every`` move to archives.
+    record
+        Record every accepted change and published world to this MCAP file.
     """
 
     model_config = SettingsConfigDict(env_prefix="SEMWM_", frozen=True, extra="ignore")
@@ -40,3 +48,8 @@ class Settings(BaseSettings):
     reorder_window: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 0.5
     max_batch: Annotated[int, Field(ge=1)] = 10000
     write_back: bool = False
+    data_dir: Path | None = None
+    sync: Literal["always", "batch"] = "always"
+    snapshot_every: Annotated[int, Field(ge=1)] = 1000
+    compact_every: Annotated[int, Field(ge=1)] = 100_000
+    record: Path | None = None

@@ -28,6 +28,7 @@ from semwm.cli.common import (
     description,
 )
 from semwm.cli.knowledge import add_knowledge_command
+from semwm.cli.persistence import add_journal_command, add_record_command, add_replay_command
 from semwm.cli.serve import add_serve_command
 from semwm.cli.simulate import add_simulate_command
 
@@ -35,6 +36,9 @@ COMMANDS: list[Callable[[Subparsers], object]] = [
     add_serve_command,
     add_simulate_command,
     add_knowledge_command,
+    add_replay_command,
+    add_record_command,
+    add_journal_command,
 ]
 """Each adds one command (group) to the ``semwm`` parser: add a command here."""
 

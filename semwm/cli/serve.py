@@ -41,8 +41,35 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         default=None,
         help="server log level (default: semwm --log-level, else info)",
     )
+    add_persistence_options(parser)
     parser.set_defaults(func=run_serve)
     return parser
+
+
+PERSISTENCE_OPTIONS = ("data_dir", "sync", "snapshot_every", "compact_every", "record")
+
+
+def add_persistence_options(parser: argparse.ArgumentParser) -> None:
+    """``--data-dir``, ``--sync``, ``--snapshot-every``, ``--compact-every``, ``--record``."""
+    group = parser.add_argument_group("persistence and recording (docs/persistence.md)")
+    group.add_argument(
+        "--data-dir",
+        type=Path,
+        help="journal every accepted change here and restore the world from it on start",
+    )
+    group.add_argument(
+        "--sync",
+        choices=["always", "batch"],
+        help="always: fsync before each answer (default); batch: a process crash loses "
+        "nothing, a power loss the commits since the last checkpoint",
+    )
+    group.add_argument("--snapshot-every", type=int, help="records between snapshots (1000)")
+    group.add_argument(
+        "--compact-every", type=int, help="records kept in the database before archiving (100000)"
+    )
+    group.add_argument(
+        "--record", type=Path, help="record changes and published worlds to FILE.mcap"
+    )
 
 
 def run_serve(args: argparse.Namespace) -> int:
@@ -54,7 +81,15 @@ def run_serve(args: argparse.Namespace) -> int:
 
     given = {
         key: getattr(args, key)
-        for key in ("knowledge", "host", "port", "reorder_window", "max_batch", "write_back")
+        for key in (
+            "knowledge",
+            "host",
+            "port",
+            "reorder_window",
+            "max_batch",
+            "write_back",
+            *PERSISTENCE_OPTIONS,
+        )
         if getattr(args, key, None) is not None
     }
     try:

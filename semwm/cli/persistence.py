@@ -1,0 +1,247 @@
+"""``semwm replay``, ``semwm record`` and ``semwm journal``: recordings and journals.
+
+* ``semwm replay SOURCE [--knowledge K] [--speed X] [--out DIR]`` feeds the changes
+  of a data directory, a JSON Lines export, an MCAP recording or a scenario back
+  through a world model and writes ``world.jsonl`` (the world published after
+  each batch) and ``metrics.json``.
+* ``semwm record SOURCE OUT.mcap`` runs the same and records it as MCAP
+  (``pip install "semwm[mcap]"``); it also writes ``world.jsonl`` beside it.
+* ``semwm journal export DATA_DIR [OUT.jsonl]``, ``semwm journal compact DATA_DIR``
+  (with the server stopped).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time as clock
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+from tqdm import tqdm
+
+from semwm.knowledge import KnowledgeError, load_knowledge
+from semwm.persistence.records import ReadReport, Record, RecordError
+from semwm.persistence.replay import Replayer, model_digest
+
+
+def _paced(records: Iterator[Record], speed: float | None) -> Iterator[Record]:
+    """Records at ``speed`` times real time (by their batches' detection times)."""
+    if not speed:
+        yield from records
+        return
+    start_wall: float | None = None
+    start_time = 0.0
+    for record in records:
+        if record.kind == "batch" and record.payload:
+            t = max(float(d["time"]) for d in record.payload)
+            if start_wall is None:
+                start_wall, start_time = clock.monotonic(), t
+            wait = (t - start_time) / speed - (clock.monotonic() - start_wall)
+            if wait > 0:
+                clock.sleep(wait)
+        yield record
+
+
+def run_replay(
+    source: str,
+    out: Path,
+    knowledge_path: Path | None = None,
+    speed: float | None = None,
+    progress: bool = True,
+    recorder_path: Path | None = None,
+) -> dict[str, Any]:
+    """Replay ``source`` into ``out`` (world.jsonl, metrics.json); returns the metrics."""
+    from semwm.persistence.sources import open_records
+
+    knowledge = load_knowledge(knowledge_path) if knowledge_path else None
+    replayer = Replayer(knowledge, strict=False)
+    report = ReadReport()
+    out.mkdir(parents=True, exist_ok=True)
+    seconds: list[float] = []
+    sizes: list[int] = []
+    recorder = None
+    with (
+        (out / "world.jsonl").open("w", encoding="utf-8") as worlds,
+        tqdm(disable=not progress, desc=f"replay {source}", unit="rec", leave=False) as bar,
+    ):
+        for record in _paced(open_records(source, report), speed):
+            start = clock.perf_counter()
+            result = replayer.apply(record)
+            elapsed = clock.perf_counter() - start
+            bar.update(1)
+            if recorder is None and recorder_path is not None and replayer.model is not None:
+                recorder = _start_recorder(recorder_path, replayer)  # writes config, knowledge
+            elif recorder is not None and (record.kind != "knowledge" or knowledge is None):
+                recorder.write_change(record)
+            if record.kind != "batch" or result is None:
+                continue
+            seconds.append(elapsed)
+            sizes.append(len(record.payload))
+            assert replayer.model is not None
+            state = replayer.model.world()
+            _write_world(worlds, state.to_dict())
+            if recorder is not None:
+                recorder.write_world(state)
+    if recorder is not None:
+        recorder.close()
+    counts = replayer.counts
+    per = np.asarray(seconds) / np.maximum(np.asarray(sizes), 1) if seconds else np.zeros(1)
+    metrics: dict[str, Any] = {
+        "source": source,
+        "knowledge": str(knowledge_path) if knowledge_path else "as recorded",
+        "records": report.records if report.records else None,
+        "batches": counts.batches,
+        "n_detections": counts.detections,
+        "refused_batches": counts.refused_batches,
+        "resets": counts.resets,
+        "skipped_knowledge_changes": counts.skipped_knowledge,
+        "tail_problem": report.problem,
+        "objects_at_end": len(replayer.model.world().objects) if replayer.model else 0,
+        "digest": model_digest(replayer.model) if replayer.model else None,
+        "time_per_detection": {
+            "mean_s": float(sum(seconds) / max(sum(sizes), 1)),
+            "median_s": float(np.median(per)),
+            "p99_s": float(np.percentile(per, 99)),
+            "total_ingest_s": float(sum(seconds)),
+        },
+    }
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+    return metrics
+
+
+def _write_world(handle: TextIO, world: dict[str, Any]) -> None:
+    handle.write(json.dumps(world) + "\n")
+
+
+def _start_recorder(path: Path, replayer: Replayer) -> Any:
+    from semwm.persistence.mcap_io import McapRecorder
+
+    assert replayer.model is not None
+    model = replayer.model
+    last = [0.0]
+
+    def scenario_clock() -> float:  # log time = the detections' time
+        if replayer.model is not None and replayer.model.latest_time is not None:
+            last[0] = max(last[0], replayer.model.latest_time)
+        return last[0]
+
+    recorder = McapRecorder.create(path, lambda: replayer.model or model, scenario_clock)
+    recorder.start(model.knowledge, replayer.reorder_window)
+    return recorder
+
+
+def replay_command(args: argparse.Namespace) -> int:
+    out = Path(args.out) if args.out else Path("runs") / f"replay-{Path(args.source).stem}"
+    try:
+        metrics = run_replay(args.source, out, args.knowledge, args.speed, not args.no_progress)
+    except (FileNotFoundError, KnowledgeError, RecordError, ImportError) as error:
+        print(f"semwm replay: {error}", file=sys.stderr)
+        return 2
+    _summary("replay", out, metrics)
+    return 0
+
+
+def record_command(args: argparse.Namespace) -> int:
+    target = Path(args.output)
+    out = target.parent if args.out is None else Path(args.out)
+    try:
+        metrics = run_replay(
+            args.source, out, args.knowledge, None, not args.no_progress, recorder_path=target
+        )
+    except (FileNotFoundError, KnowledgeError, RecordError, ImportError) as error:
+        print(f"semwm record: {error}", file=sys.stderr)
+        return 2
+    _summary("record", out, metrics)
+    print(f"recorded {target}")
+    return 0
+
+
+def _summary(what: str, out: Path, metrics: dict[str, Any]) -> None:
+    print(
+        f"{what} {metrics['source']}: {metrics['batches']} batches, "
+        f"{metrics['n_detections']} detections, {metrics['refused_batches']} refused, "
+        f"{metrics['objects_at_end']} objects at the end; wrote {out}/world.jsonl, metrics.json"
+    )
+    if metrics["tail_problem"]:
+        print(f"warning: {metrics['tail_problem']}")
+
+
+def journal_command(args: argparse.Namespace) -> int:
+    from semwm.persistence.durable import DurableWorld
+    from semwm.persistence.journal import DATABASE, StoreError
+
+    data_dir = Path(args.data_dir)
+    if not (data_dir / DATABASE).is_file():
+        print(f"semwm journal: {data_dir}: not a data directory (no {DATABASE})", file=sys.stderr)
+        return 2
+    try:
+        world = DurableWorld.open(data_dir)
+    except StoreError as error:
+        print(f"semwm journal: {error}", file=sys.stderr)
+        return 2
+    try:
+        if args.action == "export":
+            if args.output in (None, "-"):
+                count = world.export_jsonl(sys.stdout)
+            else:
+                with Path(args.output).open("w", encoding="utf-8") as handle:
+                    count = world.export_jsonl(handle)
+                print(f"exported {count} records to {args.output}")
+        elif args.action == "compact":
+            path = world.compact()
+            print(f"compacted into {path}" if path else "nothing to compact")
+        else:
+            print(json.dumps(world.status(), indent=2))
+    finally:
+        world.close()
+    return 0
+
+
+def _common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "source", help="data directory, FILE.jsonl, FILE.mcap, or a scenario name (sim1, ...)"
+    )
+    parser.add_argument("--knowledge", type=Path, help="replay into this knowledge file instead")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def add_replay_command(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``replay`` to the ``semwm`` command's sub-commands."""
+    parser: argparse.ArgumentParser = subparsers.add_parser(
+        "replay", help="feed a journal or recording back through a world model"
+    )
+    _common(parser)
+    parser.add_argument(
+        "--speed", type=float, help="times real time (default: as fast as possible)"
+    )
+    parser.add_argument("--out", help="output directory (default runs/replay-NAME)")
+    parser.set_defaults(func=replay_command)
+    return parser
+
+
+def add_record_command(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``record`` to the ``semwm`` command's sub-commands."""
+    parser: argparse.ArgumentParser = subparsers.add_parser(
+        "record", help="run a journal, export or scenario and record it as MCAP"
+    )
+    _common(parser)
+    parser.add_argument("output", help="the MCAP file to write")
+    parser.add_argument("--out", help="where world.jsonl and metrics.json go (default: beside)")
+    parser.set_defaults(func=record_command)
+    return parser
+
+
+def add_journal_command(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``journal`` (export, compact, status) to the ``semwm`` command's sub-commands."""
+    parser: argparse.ArgumentParser = subparsers.add_parser(
+        "journal", help="export, compact or inspect a data directory (server stopped)"
+    )
+    parser.add_argument("action", choices=["export", "compact", "status"])
+    parser.add_argument("data_dir", help="the --data-dir of semwm serve")
+    parser.add_argument("output", nargs="?", help="export: FILE.jsonl (default stdout)")
+    parser.set_defaults(func=journal_command)
+    return parser

@@ -1,0 +1,289 @@
+"""A world model whose every accepted change is journaled before it is acknowledged.
+
+>>> world = DurableWorld.open("data", load_knowledge("knowledge/sim1.yaml"))  # doctest: +SKIP
+>>> world.ingest([{"time": 0.0, "class": "Cup", "position": [1.0, 2.0]}])      # doctest: +SKIP
+
+Each change (batch, knowledge replacement, reset, reorder-window change) is
+appended to the journal in the same SQLite transaction that is committed only if
+the world model accepted it: a refused batch leaves neither the world nor the
+journal changed. Every ``snapshot_every`` records the model's state is
+snapshotted; when more than ``compact_every`` records sit in the database, those
+covered by the newest snapshot are moved to a gzip archive (never deleted, so an
+old snapshot can always be rebuilt from the records).
+
+Opening an existing data directory restores the newest snapshot this code can
+read and replays the records after it; a damaged record ends the journal there
+(it and everything after it are cut and reported in :attr:`recovery`).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from semwm.detection import Detection
+from semwm.knowledge.model import Knowledge
+from semwm.persistence.journal import Journal, StoreError, SyncPolicy
+from semwm.persistence.records import (
+    DamagedRecord,
+    Record,
+    RecordError,
+    batch_record,
+    config_record,
+    knowledge_record,
+    reset_record,
+    write_jsonl,
+)
+from semwm.persistence.replay import Replayer, model_digest
+from semwm.persistence.snapshot import SnapshotMismatch, restore_snapshot, take_snapshot
+from semwm.validation import DetectionInput, as_batch
+from semwm.world import IngestResult, WorldModel
+
+logger = logging.getLogger("semwm.persistence")
+
+
+@dataclass
+class Recovery:
+    """What opening the data directory did (also logged)."""
+
+    new: bool = False
+    snapshot_seq: int | None = None
+    replayed: int = 0
+    skipped_snapshots: list[str] = field(default_factory=list)
+    cut: str | None = None
+    cut_records: int = 0
+    knowledge_changed: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(vars(self))
+
+
+class DurableWorld:
+    """A :class:`WorldModel` with a journal and snapshots in ``data_dir``.
+
+    Use :meth:`open`. Reads (``world``, ``hypotheses``...) go to :attr:`model`;
+    changes go through :meth:`ingest`, :meth:`reset`, :meth:`replace_knowledge`,
+    or, for a caller that applies them itself (the HTTP service), through
+    :meth:`applying`.
+    """
+
+    def __init__(
+        self,
+        journal: Journal,
+        model: WorldModel,
+        recovery: Recovery,
+        snapshot_every: int,
+        compact_every: int,
+    ) -> None:
+        self.journal = journal
+        self.model = model
+        self.recovery = recovery
+        self.snapshot_every = snapshot_every
+        self.compact_every = compact_every
+        self._lock = threading.RLock()
+        self._last_snapshot = recovery.snapshot_seq or 0
+        self.compactions = 0
+
+    # -- opening ---------------------------------------------------------------------------
+    @classmethod
+    def open(
+        cls,
+        data_dir: str | Path,
+        knowledge: Knowledge | None = None,
+        *,
+        reorder_window: float = 0.0,
+        sync: SyncPolicy = "always",
+        snapshot_every: int = 1000,
+        compact_every: int = 100_000,
+    ) -> DurableWorld:
+        """Open (or create) ``data_dir``.
+
+        A new directory needs ``knowledge``. In an existing one the world is restored
+        as it was; then, if ``knowledge`` (or ``reorder_window``) differs from the
+        restored one, it is applied as a journaled change, like a reload.
+        """
+        if snapshot_every < 1 or compact_every < 1:
+            raise ValueError("snapshot_every and compact_every must be at least 1")
+        journal = Journal(Path(data_dir), sync)
+        recovery = Recovery()
+        try:
+            model = _restore(journal, recovery)
+            if model is None and knowledge is None:
+                raise StoreError(f"{journal.path}: a new data directory needs knowledge")
+        except BaseException:
+            journal.close()
+            raise
+        if model is None:
+            assert knowledge is not None
+            recovery.new = True
+            model = WorldModel(knowledge, reorder_window=reorder_window)
+            with journal.transaction():
+                journal.append(config_record(reorder_window))
+                journal.append(knowledge_record(knowledge))
+            return cls(journal, model, recovery, snapshot_every, compact_every)
+        world = cls(journal, model, recovery, snapshot_every, compact_every)
+        if reorder_window != model.reorder_window:
+            with world.applying(config_record(reorder_window)):
+                model.reorder_window = reorder_window
+        if knowledge is not None and knowledge.document != model.knowledge.document:
+            recovery.knowledge_changed = True
+            logger.warning(
+                "%s: the knowledge given differs from the journal's; applying it", journal.path
+            )
+            world.replace_knowledge(knowledge)
+        return world
+
+    # -- changes ---------------------------------------------------------------------------
+    @contextmanager
+    def applying(self, record: Record) -> Iterator[None]:
+        """Journal ``record`` around the code that applies it to :attr:`model`.
+
+        The record is appended in a transaction; if the body raises, the
+        transaction is rolled back (the change was refused and never happened),
+        else it is committed before this returns. Then a snapshot or a compaction
+        may follow.
+        """
+        with self._lock:
+            with self.journal.transaction():
+                seq = self.journal.append(record)
+                yield
+            if seq - self._last_snapshot >= self.snapshot_every:
+                self.snapshot()
+                if self.journal.count() > self.compact_every:
+                    self.compact()
+
+    def ingest(self, detections: DetectionInput | Iterable[DetectionInput]) -> IngestResult:
+        """:meth:`WorldModel.ingest`, journaled (nothing is journaled when it raises)."""
+        batch = [d.to_dict() if isinstance(d, Detection) else dict(d) for d in as_batch(detections)]
+        with self.applying(batch_record(batch)):
+            return self.model.ingest(batch)
+
+    def reset(self) -> None:
+        with self.applying(reset_record()):
+            self.model.reset()
+
+    def replace_knowledge(self, knowledge: Knowledge) -> None:
+        with self.applying(knowledge_record(knowledge)):
+            self.model.replace_knowledge(knowledge)
+
+    # -- maintenance -----------------------------------------------------------------------
+    def snapshot(self) -> int:
+        """Snapshot the model now; returns the journal position it covers."""
+        with self._lock:
+            seq = self.journal.last_seq()
+            try:
+                snapshot = take_snapshot(self.model, seq)
+            except Exception as error:  # a state that does not pickle: journal only
+                logger.error("snapshot failed (the journal still has everything): %s", error)
+                return self._last_snapshot
+            with self.journal.transaction():
+                self.journal.save_snapshot(snapshot)
+            self._last_snapshot = seq
+            return seq
+
+    def compact(self) -> Path | None:
+        """Snapshot, then move the records it covers to an archive."""
+        with self._lock:
+            through = self.snapshot()
+            path = self.journal.compact(through)
+            if path is not None:
+                self.compactions += 1
+                logger.info("journal compacted through record %d into %s", through, path)
+            return path
+
+    def records(self) -> Iterator[Record]:
+        """Every record, archived and stored, in order."""
+        with self._lock:
+            yield from self.journal.archived_records()
+            yield from self.journal.records(after=int(self.journal.meta("archived_through") or 0))
+
+    def export_jsonl(self, handle: IO[str]) -> int:
+        """Write every record as JSON Lines (what ``semwm replay`` reads)."""
+        return write_jsonl(self.records(), handle)
+
+    def digest(self) -> str:
+        """The digest of the world published now (:func:`model_digest`)."""
+        with self._lock:
+            return model_digest(self.model)
+
+    def status(self) -> dict[str, Any]:
+        with self._lock:
+            return {
+                "data_dir": str(self.journal.data_dir),
+                "sync": self.journal.sync,
+                "last_seq": self.journal.last_seq(),
+                "records_in_database": self.journal.count(),
+                "snapshot_seq": self._last_snapshot or None,
+                "archives": len(self.journal.archives()),
+                "bytes": self.journal.size_bytes(),
+                "recovery": self.recovery.to_dict(),
+            }
+
+    def close(self) -> None:
+        with self._lock:
+            self.journal.close()
+
+
+def _restore(journal: Journal, recovery: Recovery) -> WorldModel | None:
+    """The world of the stored journal (``None`` for an empty store)."""
+    replayer: Replayer | None = None
+    for snapshot in journal.snapshots():
+        try:
+            model = restore_snapshot(snapshot)
+        except SnapshotMismatch as error:
+            recovery.skipped_snapshots.append(f"snapshot {snapshot.seq}: {error}")
+            logger.warning(
+                "snapshot %d not used: %s; rebuilding from the journal", snapshot.seq, error
+            )
+            continue
+        replayer = Replayer(reorder_window=model.reorder_window)
+        replayer.model = model
+        replayer.last_seq = snapshot.seq
+        recovery.snapshot_seq = snapshot.seq
+        break
+    if replayer is None:
+        replayer = Replayer()
+        first = journal.first_seq()
+        archived = int(journal.meta("archived_through") or 0)
+        if archived:
+            for record in journal.archived_records():
+                replayer.apply(record)
+        elif first is not None and first > 1:
+            raise StoreError(
+                f"{journal.path}: the journal starts at record {first}, no archive holds the "
+                "records before it and no snapshot is readable by this code: cannot rebuild"
+            )
+    _replay_tail(journal, replayer, recovery)
+    return replayer.model
+
+
+def _replay_tail(journal: Journal, replayer: Replayer, recovery: Recovery) -> None:
+    start = replayer.last_seq
+    records = journal.records(after=start)
+    while True:
+        try:
+            record = next(records)
+        except StopIteration:
+            return
+        except DamagedRecord as error:
+            _cut(journal, error.seq, str(error), recovery)
+            return
+        try:
+            replayer.apply(record)
+        except RecordError as error:
+            _cut(journal, record.seq, str(error), recovery)
+            return
+        recovery.replayed += 1
+
+
+def _cut(journal: Journal, seq: int, problem: str, recovery: Recovery) -> None:
+    with journal.transaction():
+        count = journal.cut(seq)
+    recovery.cut = problem
+    recovery.cut_records = count
+    logger.error("%s; the journal was cut at record %d (%d record(s) dropped)", problem, seq, count)
