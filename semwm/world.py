@@ -81,6 +81,22 @@ def _scan_key(m: Measurement) -> ScanKey:
     return (m.time, m.source or "")
 
 
+def _stored_positions(tracks: Sequence[Track], dim: int) -> tuple[FloatArray, FloatArray]:
+    """Combined positions ``(N, d)`` and covariances ``(N, d, d)`` of stored versions."""
+    position = np.zeros((len(tracks), dim))
+    covariance = np.zeros((len(tracks), dim, dim))
+    groups: dict[tuple[int, ...], list[int]] = {}
+    for i, track in enumerate(tracks):
+        groups.setdefault(track.x.shape, []).append(i)
+    for rows in groups.values():  # one batched call per filter shape
+        x = np.stack([tracks[i].x[:, :dim] for i in rows])  # (N, M, d)
+        P = np.stack([tracks[i].P[:, :dim, :dim] for i in rows])
+        mu = np.stack([tracks[i].mu for i in rows])  # (N, M)
+        position[rows] = np.einsum("nm,nmd->nd", mu, x)
+        covariance[rows] = np.einsum("nm,nmij->nij", mu, P)
+    return position, covariance
+
+
 def _summary_position(track: Track, dim: int) -> tuple[FloatArray, FloatArray]:
     """Combined position and covariance of a stored version (no prediction)."""
     x = track.mu @ track.x[:, :dim]
@@ -316,9 +332,32 @@ class WorldModel:
             return {state.tracks[k].lineage: state.tracks[k] for k in state.best.tracks}
         if state.time is None:
             return {}
-        marginals, _ = self._marginals(state.time)
+        # existence at the latest time (the scan updated it); inside the region judged
+        # from each version as stored (a version not updated by the scan is not
+        # predicted: this decides ids only; queries predict)
+        tracks = [state.tracks[k] for k in state.tracks]
+        inside = dict(
+            zip(
+                (t.key for t in tracks),
+                inside_probability(
+                    *_stored_positions(tracks, self._knowledge.world.dimension),
+                    self._knowledge.world.region,
+                ).tolist(),
+                strict=True,
+            )
+        )
+        totals: dict[int, float] = {}
+        chosen: dict[int, Track] = {}
+        for cluster in state.clusters:
+            for h in cluster.hypotheses:  # most probable first
+                p = math.exp(h.log_weight)
+                for key in h.tracks:
+                    track = state.tracks[key]
+                    value = p * state.existence.get(key, 1.0) * inside[key]
+                    totals[track.lineage] = totals.get(track.lineage, 0.0) + value
+                    chosen.setdefault(track.lineage, track)
         floor = self._knowledge.world.min_existence
-        return {lineage: m.track for lineage, m in marginals.items() if m.existence >= floor}
+        return {lineage: chosen[lineage] for lineage, e in totals.items() if e >= floor}
 
     def _marginals(self, at: float) -> tuple[dict[int, _Marginal], Predicted]:
         """Every object's marginal existence at ``at`` and its most probable version."""

@@ -109,6 +109,19 @@ def advice(knowledge: Knowledge) -> list[Problem]:
             odds = r0 / (1.0 - r0) if r0 < 1.0 else math.inf
             if odds >= target:
                 continue
+            decay = math.exp(
+                -3.0 * (spec.detection_frequency + spec.leave_frequency) / spec.detection_frequency
+            )
+            if r0 * decay < world.removal_existence:
+                warnings.append(
+                    _warning(
+                        f"a new {name!r} seen by {detector.name!r} starts with existence "
+                        f"{r0:.3g} and is removed (removal_existence "
+                        f"{world.removal_existence:g}) if three expected detections are "
+                        "missed: lower world.removal_existence, or the clutter density",
+                        ("world", "removal_existence"),
+                    )
+                )
             names = [d.name for d in knowledge.document.detectors]
             where = ("detectors", names.index(detector.name))
             if gain <= 1.0:

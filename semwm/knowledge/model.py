@@ -69,7 +69,9 @@ class WorldSettings(Frozen):
         this (queries may ask for another threshold).
     removal_existence
         ``mht`` only: an object whose existence falls below this is removed from every
-        hypothesis.
+        hypothesis (1e-5, as PMBM trackers prune Bernoulli components). It must stay
+        well below a new object's first existence b / (b + c), or new objects are
+        removed before their second detection (``semwm knowledge validate`` warns).
     label_gate
         Distance (m) within which a labelled detection may update the object holding
         its label even outside the Mahalanobis gate (paper 000: a robot's own report).
@@ -94,7 +96,7 @@ class WorldSettings(Frozen):
     association_model: Literal["paper", "mht"] = "mht"
     missed_detection_term: bool = True
     min_existence: Annotated[float, Field(gt=0.0, le=1.0)] = 0.5
-    removal_existence: Annotated[float, Field(gt=0.0, lt=1.0)] = 1e-3
+    removal_existence: Annotated[float, Field(gt=0.0, lt=1.0)] = 1e-5
     label_gate: Positive = 2.0
     label_error_rate: Annotated[float, Field(gt=0.0, lt=1.0)] = 1e-3
     gate_probability: Annotated[float, Field(gt=0.0, le=1.0)] = 0.9999
@@ -190,7 +192,9 @@ class ClassSpec(Frozen):
         Paper 000 C3: an object not updated for this long (s) is removed.
     leave_frequency
         ``mht``: the rate (Hz) at which an object of this class leaves the world
-        anywhere (its existence decays at this rate even where no sensor sees it).
+        anywhere (its existence decays at this rate even where no sensor sees it);
+        default 0.01 (an average stay of 100 s). 0 means objects never leave: one
+        that certainly exists then never loses existence by going unseen.
     disappearance
         ``mht``: disappearance relations, the mirror of ``appearance`` ("people leave
         through doors"): near a target the object leaves at the relation's rate.

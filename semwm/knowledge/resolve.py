@@ -41,6 +41,11 @@ INHERITED_FIELDS = (  # what a class takes from its is-a parents when it leaves 
 _REQUIRED = ("detection_frequency", "filter", "measurement_noise")
 DEFAULT_NEW_FREQUENCY = 0.1
 """Hz; base rate of new objects when no class in the chain sets one."""
+DEFAULT_LEAVE_FREQUENCY = 0.01
+"""Hz; objects leave at this rate (an average stay of 100 s) when no class in the chain
+sets one. Without any leave rate an object that certainly exists never loses existence
+by going unseen (semwm.mhf.existence); with it, an object unseen where it would be seen
+at rate f drops below existence 0.5 after about ln(f / mu) / f seconds."""
 DEFAULT_VELOCITY_VARIANCE = 1.0
 """m^2/s^2 per axis; initial velocity variance when no class in the chain sets one."""
 
@@ -281,7 +286,11 @@ def _resolve(
             ),
             max_position_variance=values["max_position_variance"],
             max_time_without_update=values["max_time_without_update"],
-            leave_frequency=values["leave_frequency"] or 0.0,
+            leave_frequency=(
+                values["leave_frequency"]
+                if values["leave_frequency"] is not None
+                else DEFAULT_LEAVE_FREQUENCY
+            ),
             disappearance=values["disappearance"] or (),
             category=values["category"],
         )

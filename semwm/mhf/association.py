@@ -341,14 +341,24 @@ class Associator:
                 log_lik = self._label_robust(
                     log_lik, labelled[rows_j, rows_i], diff, rows_j, rows_i, predicted, R
                 )
+            if mht:  # Bayes over the class distribution (semwm.mhf.classes)
+                prior = np.stack([tracks[i].class_probs for i in rows_i])
+                columns = np.stack(
+                    [
+                        self.class_model.likelihood(measurements[j].detector, measurements[j].cls)
+                        for j in rows_j
+                    ]
+                )
+                posteriors = prior * columns
+                posteriors /= posteriors.sum(axis=1, keepdims=True)
+                names = self.class_model.names
+                refined_all = [names[k] for k in self.class_model.published_many(posteriors)]
             for row, (i, j) in enumerate(zip(rows_i, rows_j, strict=True)):
                 old = tracks[i]
                 m = measurements[j]
                 xs, Ps, mus = x_new[row], P_new[row], mu_new[row]
-                if mht:  # Bayes over the class distribution (semwm.mhf.classes)
-                    posterior = old.class_probs * self.class_model.likelihood(m.detector, m.cls)
-                    class_probs = posterior / posterior.sum()
-                    refined = self.class_model.published(class_probs)
+                if mht:
+                    class_probs, refined = posteriors[row], refined_all[row]
                 else:  # eq. (8): the more specific of two compatible classes
                     refined = self.taxonomy.most_specific(old.cls, m.cls)
                     class_probs = self.class_model.point(refined)

@@ -32,6 +32,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from semwm.filters.motion import FloatArray
 from semwm.knowledge.taxonomy import Taxonomy
@@ -101,13 +102,22 @@ class ClassModel:
 
     def published(self, probabilities: FloatArray) -> str:
         """The most specific class whose subtree holds more than :data:`PUBLISH_MASS`."""
-        mass = self.subtree @ probabilities
-        candidates = np.flatnonzero(mass > PUBLISH_MASS + 1e-12)
-        if candidates.size == 0:
-            return self.names[int(np.argmax(probabilities))]
-        # deepest first; among equals, the larger mass, then the name order
-        best = max(candidates, key=lambda i: (self.depth[i], mass[i], -i))
-        return self.names[int(best)]
+        return self.names[int(self.published_many(probabilities[None, :])[0])]
+
+    def published_many(self, probabilities: FloatArray) -> npt.NDArray[np.intp]:
+        """:meth:`published` for ``(N, K)`` distributions, as class indices ``(N,)``.
+
+        Among the classes holding more than half, the deepest wins, then the larger
+        mass, then the first name; with none, the most probable class.
+        """
+        mass = probabilities @ self.subtree.T  # (N, K): mass of each class's subtree
+        candidate = mass > PUBLISH_MASS + 1e-12
+        score = np.where(candidate, self.depth[None, :] * 4.0 + mass, -np.inf)
+        chosen: npt.NDArray[np.intp] = np.argmax(score, axis=1)
+        none = ~candidate.any(axis=1)
+        if none.any():
+            chosen[none] = np.argmax(probabilities[none], axis=1)
+        return chosen
 
     def as_dict(self, probabilities: FloatArray, floor: float = 1e-3) -> dict[str, float]:
         """The distribution as ``{class: probability}``, classes below ``floor`` left out."""

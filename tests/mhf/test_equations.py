@@ -146,9 +146,11 @@ def test_second_detection_mht() -> None:
     inside = (ndtr((10 - 1.0) / sd) - ndtr((0 - 1.0) / sd)) * (
         ndtr((4 - 2.0) / sd) - ndtr(-2.0 / sd)
     )
-    r0 = FN / (FC + FN)
-    stay = math.exp(-FE * inside * dt)
-    r1 = r0 * stay / (1 - r0 + r0 * stay)
+    r0, mu = FN / (FC + FN), 0.01  # mu: the default leave_frequency
+    f = FE * inside
+    stay = math.exp(-(mu + f) * dt)
+    left = mu / (mu + f) * (1 - stay)  # it may have left unseen
+    r1 = r0 * stay / (1 - r0 + r0 * (stay + left))
     dens = math.exp(-0.5 * y @ np.linalg.inv(S) @ y) / (2 * math.pi * math.sqrt(np.linalg.det(S)))
     w_same, w_new = r1 * FE * dens, (FC + FN) / V
     got = _existence(wm)
