@@ -84,9 +84,7 @@ def get_world(
     """The objects of the world (each at least ``min_existence`` likely to exist over the
     whole hypothesis set), predicted to ``time``."""
     centre = parse_near(near) if near is not None else None
-    state = world.world(
-        time=time, cls=cls, near=centre, label=label, min_existence=min_existence
-    )
+    state = world.world(time=time, cls=cls, near=centre, label=label, min_existence=min_existence)
     return WorldOut.model_validate(state.to_dict())
 
 

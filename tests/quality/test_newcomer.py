@@ -58,7 +58,11 @@ def _world(tmp_path: Path, **world: object) -> WorldModel:
 def _cup_stream(rng: np.random.Generator, seconds: float, rate: float = 5.0, at=(1.0, 1.0)):
     times = np.arange(0.0, seconds, 1.0 / rate)
     return [
-        {"time": float(t), "class": "Cup", "position": list(np.asarray(at) + rng.normal(0, 0.05, 2))}
+        {
+            "time": float(t),
+            "class": "Cup",
+            "position": list(np.asarray(at) + rng.normal(0, 0.05, 2)),
+        }
         for t in times
     ]
 
