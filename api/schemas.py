@@ -100,7 +100,7 @@ class IngestOut(BaseModel):
 
 
 class WorldObjectOut(BaseModel):
-    """An object of the most probable hypothesis, predicted to the query time."""
+    """An object of the world, predicted to the query time."""
 
     model_config = ConfigDict(populate_by_name=True)
 
@@ -110,11 +110,18 @@ class WorldObjectOut(BaseModel):
     position: list[float] = Field(description="m")
     velocity: list[float] | None = Field(description="m/s; null for classes without velocity")
     covariance: list[list[float]] = Field(description="position covariance (m^2)")
-    existence: float = Field(description="probability that the object exists")
+    existence: float = Field(
+        description="probability that the object exists, over every hypothesis"
+    )
     last_seen: float = Field(description="time of its last detection (s)")
     created: float | None = Field(default=None, description="time of its first detection (s)")
     mode_probabilities: dict[str, float] | None = Field(
         default=None, description="IMM motion model -> probability"
+    )
+    class_probabilities: dict[str, float] | None = Field(
+        default=None,
+        description="class -> probability that it is the object's true class (classes below "
+        "0.001 left out); 'class' is the most specific class holding more than half",
     )
 
 
@@ -129,6 +136,7 @@ WORLD_OBJECT_EXAMPLE: dict[str, Any] = {
     "last_seen": 12.3,
     "created": 10.0,
     "mode_probabilities": None,
+    "class_probabilities": {"Cup": 0.97, "Mug": 0.03},
 }
 
 
@@ -153,19 +161,29 @@ class HypothesisObjectOut(BaseModel):
     cls: str = Field(alias="class")
     label: str | None
     position: list[float]
+    existence: float = Field(description="its existence probability in this hypothesis")
 
 
 class HypothesisOut(BaseModel):
     """One hypothesis: its probability and its objects."""
 
     probability: float
+    log10_probability: float = Field(
+        description="log10 of the probability (exact where the probability rounds to 0)"
+    )
     objects: list[HypothesisObjectOut]
 
 
 class HypothesesOut(BaseModel):
     """The most probable hypotheses, best first."""
 
-    total: int = Field(description="How many hypotheses the filter holds.")
+    total: int = Field(
+        description="How many hypotheses the filter stores (the sum over its clusters)."
+    )
+    clusters: int = Field(description="Independent groups of hypotheses.")
+    log10_joint: float = Field(
+        description="log10 of the number of global hypotheses (combinations of the clusters')."
+    )
     hypotheses: list[HypothesisOut]
 
 
@@ -205,6 +223,7 @@ class HealthOut(BaseModel):
                     "knowledge": "knowledge/sim1.yaml",
                     "time": 12.3,
                     "hypotheses": 4,
+                    "hypotheses_log10_joint": 0.6,
                     "objects": 7,
                 }
             ]
@@ -214,7 +233,10 @@ class HealthOut(BaseModel):
     status: str = "ok"
     knowledge: str | None
     time: float | None
-    hypotheses: int
+    hypotheses: int = Field(description="hypotheses stored (the sum over clusters)")
+    hypotheses_log10_joint: float = Field(
+        default=0.0, description="log10 of the number of global hypotheses"
+    )
     objects: int
 
 

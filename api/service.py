@@ -154,6 +154,7 @@ class WorldService:
         cls: str | None = None,
         near: tuple[float, ...] | None = None,
         label: str | None = None,
+        min_existence: float | None = None,
     ) -> WorldState:
         with self._lock:
             self._check_class(cls)
@@ -165,7 +166,9 @@ class WorldService:
                     f"found {len(near)}",
                 )
             try:
-                return self._model.world(time=time, cls=cls, near=near, label=label)
+                return self._model.world(
+                    time=time, cls=cls, near=near, label=label, min_existence=min_existence
+                )
             except ValueError as error:
                 raise InvalidError.one(("query",), str(error)) from error
 
@@ -179,9 +182,15 @@ class WorldService:
             raise NotFoundError(f"no object with id {object_id} in the world")
         return found
 
-    def hypotheses(self, limit: int) -> tuple[int, list[HypothesisSummary]]:
+    def hypotheses(self, limit: int) -> tuple[dict[str, Any], list[HypothesisSummary]]:
+        """The counts (stored, clusters, log10 of the joint) and the best hypotheses."""
         with self._lock:
-            return self._model.hypothesis_count, list(self._model.hypotheses(limit))
+            counts = {
+                "total": self._model.hypothesis_count,
+                "clusters": self._model.cluster_count,
+                "log10_joint": self._model.log10_joint_hypotheses,
+            }
+            return counts, list(self._model.hypotheses(limit))
 
     def health(self) -> dict[str, Any]:
         with self._lock:
@@ -190,6 +199,7 @@ class WorldService:
                 "knowledge": str(self.knowledge_path) if self.knowledge_path else None,
                 "time": self._model.latest_time,
                 "hypotheses": self._model.hypothesis_count,
+                "hypotheses_log10_joint": self._model.log10_joint_hypotheses,
                 "objects": self._model.object_count,
             }
 

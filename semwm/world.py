@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -24,10 +24,11 @@ from semwm.detection import OutOfOrderError
 from semwm.filters.motion import FloatArray
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
+from semwm.mhf.existence import inside_probability
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted
-from semwm.mhf.state import MHFState, Track
+from semwm.mhf.state import Cluster, MHFState, Track
 from semwm.validation import DetectionInput, as_batch, check, out_of_range, parse
 from semwm.world_types import HypothesisObject, HypothesisSummary, WorldObject, WorldState
 
@@ -43,6 +44,18 @@ class IngestResult:
     applied: int
     time: float | None
     ignored: int = 0
+
+
+@dataclass(frozen=True)
+class _Marginal:
+    """What the whole hypothesis set says of one object (lineage) at a time: its
+    existence probability (the sum over hypotheses of p(h) times the existence of
+    the version h holds, inside the region) and its version in the most probable
+    hypothesis that holds it, with that version's row in the prediction."""
+
+    existence: float
+    track: Track
+    row: int
 
 
 @dataclass(frozen=True)
@@ -66,6 +79,22 @@ class _Published:
 
 def _scan_key(m: Measurement) -> ScanKey:
     return (m.time, m.source or "")
+
+
+def _stored_positions(tracks: Sequence[Track], dim: int) -> tuple[FloatArray, FloatArray]:
+    """Combined positions ``(N, d)`` and covariances ``(N, d, d)`` of stored versions."""
+    position = np.zeros((len(tracks), dim))
+    covariance = np.zeros((len(tracks), dim, dim))
+    groups: dict[tuple[int, ...], list[int]] = {}
+    for i, track in enumerate(tracks):
+        groups.setdefault(track.x.shape, []).append(i)
+    for rows in groups.values():  # one batched call per filter shape
+        x = np.stack([tracks[i].x[:, :dim] for i in rows])  # (N, M, d)
+        P = np.stack([tracks[i].P[:, :dim, :dim] for i in rows])
+        mu = np.stack([tracks[i].mu for i in rows])  # (N, M)
+        position[rows] = np.einsum("nm,nmd->nd", mu, x)
+        covariance[rows] = np.einsum("nm,nmij->nij", mu, P)
+    return position, covariance
 
 
 def _summary_position(track: Track, dim: int) -> tuple[FloatArray, FloatArray]:
@@ -125,12 +154,23 @@ class WorldModel:
 
     @property
     def hypothesis_count(self) -> int:
+        """Hypotheses stored (the sum over clusters; see :attr:`log10_joint_hypotheses`)."""
         return self._state.hypothesis_count
 
     @property
+    def log10_joint_hypotheses(self) -> float:
+        """log10 of the number of global hypotheses (combinations of the clusters')."""
+        return self._state.log10_joint_count
+
+    @property
+    def cluster_count(self) -> int:
+        """Independent groups of hypotheses (clusters)."""
+        return len(self._state.clusters)
+
+    @property
     def object_count(self) -> int:
-        """Objects in the most probable hypothesis."""
-        return len(self._state.best.tracks)
+        """Objects of the published world."""
+        return len(self._published)
 
     @property
     def track_count(self) -> int:
@@ -147,13 +187,21 @@ class WorldModel:
             )
         MultipleHypothesisFilter(knowledge)  # fail here, before anything changes
         gone = {k for k, t in self._state.tracks.items() if t.cls not in knowledge.classes}
+        old_names = self._mhf.associator.class_model.names
         self._set_knowledge(knowledge)
+        self._state = _remap_classes(self._state, old_names, self._mhf.associator.class_model.names)
         if gone:
             state = self._state
             clusters = self._mhf.without(state.clusters, gone, state.tracks)
             referenced: set[int] = set().union(*(c.keys for c in clusters))
             tracks = {k: state.tracks[k] for k in referenced}
-            self._state = MHFState(clusters, tracks, state.time, state.next_key)
+            existence = {k: state.existence.get(k, 1.0) for k in referenced}
+            self._state = MHFState(clusters, tracks, state.time, state.next_key, existence)
+        self._published = {
+            i: p for i, p in self._published.items() if p.track.cls in knowledge.classes
+        }
+        self._lost = {i: p for i, p in self._lost.items() if p.track.cls in knowledge.classes}
+        if gone:
             self._publish()
         self._log = []
 
@@ -218,7 +266,7 @@ class WorldModel:
 
     # ------------------------------------------------------------------ ids
     def _publish(self) -> None:
-        """Give public ids to the MAP hypothesis's objects.
+        """Give public ids to the objects of the published world (:meth:`_current`).
 
         An object keeps its id as long as its lineage lives. A lineage new to the MAP
         takes over the id of a published object that left the MAP (the MAP switched to
@@ -228,7 +276,7 @@ class WorldModel:
         """
         state = self._state
         dim = self._knowledge.world.dimension
-        current = {state.tracks[k].lineage: state.tracks[k] for k in state.best.tracks}
+        current = self._current()
         alive = {t.lineage for t in state.tracks.values()}
         for object_id, pub in list(self._published.items()):
             if pub.lineage not in current:
@@ -276,14 +324,100 @@ class WorldModel:
                 del self._lost[object_id]
 
     # ------------------------------------------------------------------ queries
+    def _current(self) -> dict[int, Track]:
+        """The published world at the latest time: lineage -> version. ``mht``: objects
+        whose existence is at least ``min_existence``; ``paper``: the MAP hypothesis."""
+        state = self._state
+        if not self._mhf.mht:
+            return {state.tracks[k].lineage: state.tracks[k] for k in state.best.tracks}
+        if state.time is None:
+            return {}
+        # existence at the latest time (the scan updated it); inside the region judged
+        # from each version as stored (a version not updated by the scan is not
+        # predicted: this decides ids only; queries predict)
+        tracks = [state.tracks[k] for k in state.tracks]
+        inside = dict(
+            zip(
+                (t.key for t in tracks),
+                inside_probability(
+                    *_stored_positions(tracks, self._knowledge.world.dimension),
+                    self._knowledge.world.region,
+                ).tolist(),
+                strict=True,
+            )
+        )
+        totals: dict[int, float] = {}
+        chosen: dict[int, Track] = {}
+        for cluster in state.clusters:
+            for h in cluster.hypotheses:  # most probable first
+                p = math.exp(h.log_weight)
+                for key in h.tracks:
+                    track = state.tracks[key]
+                    value = p * state.existence.get(key, 1.0) * inside[key]
+                    totals[track.lineage] = totals.get(track.lineage, 0.0) + value
+                    chosen.setdefault(track.lineage, track)
+        floor = self._knowledge.world.min_existence
+        return {lineage: chosen[lineage] for lineage, e in totals.items() if e >= floor}
+
+    def _marginals(self, at: float) -> tuple[dict[int, _Marginal], Predicted]:
+        """Every object's marginal existence at ``at`` and its most probable version."""
+        state = self._state
+        keys = list(state.tracks)
+        predicted = self._mhf.predict(state, keys, at)
+        if self._mhf.mht:
+            future = at if state.time is not None and at > state.time else state.time or at
+            existence, log_q = self._mhf.existence_at(state, predicted, future)
+            clusters: tuple[Cluster, ...] = (
+                self._mhf.undetected(state.clusters, log_q, state.tracks)
+                if log_q
+                else state.clusters
+            )
+            inside = inside_probability(
+                predicted.position, predicted.position_covariance, self._knowledge.world.region
+            )
+        else:
+            existence = dict.fromkeys(keys, 1.0)
+            clusters = state.clusters
+            inside = np.ones(len(keys))
+        row = {k: i for i, k in enumerate(keys)}
+        gone = self._mhf.leaving(predicted, at, existence if self._mhf.mht else None)
+        result: dict[int, _Marginal] = {}
+        for cluster in clusters:
+            totals: dict[int, float] = {}
+            chosen: dict[int, Track] = {}
+            for h in cluster.hypotheses:  # most probable first
+                p = math.exp(h.log_weight)
+                for key in h.tracks:
+                    if key in gone:
+                        continue
+                    track = state.tracks[key]
+                    lineage = track.lineage
+                    totals[lineage] = (
+                        totals.get(lineage, 0.0) + p * existence[key] * inside[row[key]]
+                    )
+                    chosen.setdefault(lineage, track)
+            for lineage, total in totals.items():
+                if lineage not in result or result[lineage].existence < total:
+                    track = chosen[lineage]
+                    result[lineage] = _Marginal(min(1.0, total), track, row[track.key])
+        return result, predicted
+
     def world(
         self,
         time: float | None = None,
         cls: str | None = None,
         near: Sequence[float] | None = None,
         label: str | None = None,
+        min_existence: float | None = None,
     ) -> WorldState:
-        """The objects of the most probable hypothesis, predicted to ``time`` (s).
+        """The objects of the world, predicted to ``time`` (s).
+
+        ``mht``: every object whose existence probability (over the whole hypothesis
+        set, :class:`_Marginal`) is at least ``min_existence`` (default: the
+        knowledge's ``world.min_existence``), in the version of the most probable
+        hypothesis that holds it: a near tie between hypotheses does not make an
+        object flicker. ``paper``: the maximum a posteriori hypothesis's objects.
+        Objects created after ``time`` are not listed.
 
         Parameters
         ----------
@@ -293,6 +427,8 @@ class WorldModel:
             ``(x, y, r)`` or ``(x, y, z, r)``: only objects within ``r`` metres.
         label
             Only objects carrying this label.
+        min_existence
+            Only objects at least this likely to exist (``0 < min_existence <= 1``).
         """
         dim = self._knowledge.world.dimension
         if cls is not None and cls not in self._knowledge.classes:
@@ -300,18 +436,25 @@ class WorldModel:
             raise ValueError(f"unknown class {cls!r}; known classes: {known}")
         if near is not None and len(near) != dim + 1:
             raise ValueError(f"near needs {dim} coordinates and a radius; got {len(near)} values")
+        if min_existence is not None and not 0.0 < min_existence <= 1.0:
+            raise ValueError(f"min_existence must be in (0, 1]; got {min_existence}")
+        floor = min_existence if min_existence is not None else self._knowledge.world.min_existence
         state = self._state
         at = time if time is not None else state.time
-        if at is None:
-            return WorldState(time=None, objects=())
-        keys = list(state.best.tracks)
-        predicted = self._mhf.predict(state, keys, at)
-        gone = self._mhf.leaving(predicted, at)
-        existence = self._existence(state)
+        if at is None or not math.isfinite(at):
+            return WorldState(time=at, objects=())
+        marginals, predicted = self._marginals(at)
+        if not self._mhf.mht:
+            best = {state.tracks[k].lineage for k in state.best.tracks}
+            marginals = {lineage: m for lineage, m in marginals.items() if lineage in best}
+            floor = 0.0
         covered = self.taxonomy.covers(cls) if cls is not None else None
         objects = []
-        for i, track in enumerate(predicted.tracks):
-            if track.key in gone or (covered is not None and track.cls not in covered):
+        for marginal in marginals.values():
+            track, i = marginal.track, marginal.row
+            if marginal.existence < floor or track.created > at + 1e-9:
+                continue
+            if covered is not None and track.cls not in covered:
                 continue
             if label is not None and track.label != label:
                 continue
@@ -321,23 +464,13 @@ class WorldModel:
                 and float(np.linalg.norm(position - np.asarray(near[:dim]))) > near[dim]
             ):
                 continue
-            objects.append(self._world_object(track, predicted, i, existence[track.lineage]))
+            objects.append(self._world_object(track, predicted, i, marginal.existence))
         objects.sort(key=lambda o: o.id)
-        return WorldState(time=at, objects=tuple(objects))
+        return WorldState(time=at, objects=tuple(_unique_labels(objects)))
 
     def object(self, object_id: int, time: float | None = None) -> WorldObject | None:
         """One object of the world by its id, or ``None``."""
         return next((o for o in self.world(time).objects if o.id == object_id), None)
-
-    def _existence(self, state: MHFState) -> dict[int, float]:
-        """Total probability of the hypotheses that hold each lineage."""
-        totals: dict[int, float] = {}
-        tracks = state.tracks
-        for h in (h for c in state.clusters for h in c.hypotheses):
-            p = math.exp(h.log_weight)
-            for lineage in {tracks[k].lineage for k in h.tracks}:
-                totals[lineage] = totals.get(lineage, 0.0) + p
-        return totals
 
     def _world_object(
         self, track: Track, predicted: Predicted, i: int, existence: float
@@ -354,9 +487,11 @@ class WorldModel:
             ]
             modes = {n: float(p) for n, p in zip(names, predicted.mu[i], strict=True)}
         object_id = self._ids.get(track.lineage)
-        if object_id is None:  # published on the next ingest; give it an id now
-            self._publish()
-            object_id = self._ids[track.lineage]
+        if object_id is None:
+            # below the publishing threshold and asked for (min_existence): a provisional
+            # id, -(1 + the number of the detection that started it). Queries change
+            # nothing, so a replay of the same detections publishes the same ids.
+            object_id = -(1 + track.lineage)
         return WorldObject(
             id=object_id,
             cls=track.cls,
@@ -370,6 +505,11 @@ class WorldModel:
             last_seen=track.last_seen,
             created=track.created,
             mode_probabilities=modes,
+            class_probabilities=(
+                self._mhf.associator.class_model.as_dict(track.class_probs)
+                if self._mhf.mht
+                else None
+            ),
         )
 
     def hypotheses(self, k: int = 10) -> list[HypothesisSummary]:
@@ -391,9 +531,49 @@ class WorldModel:
                         cls=track.cls,
                         label=track.label,
                         position=tuple(float(v) for v in x),
+                        existence=state.existence.get(key, 1.0),
                     )
                 )
             summaries.append(
-                HypothesisSummary(probability=math.exp(h.log_weight), objects=tuple(objects))
+                HypothesisSummary(
+                    probability=math.exp(h.log_weight),
+                    log10_probability=h.log_weight / math.log(10.0),
+                    objects=tuple(objects),
+                )
             )
         return summaries
+
+
+def _remap_classes(state: MHFState, old: tuple[str, ...], new: tuple[str, ...]) -> MHFState:
+    """Carry every version's class distribution over to a changed class list: mass on a
+    class that is gone is dropped, a new class starts at 0 (renormalised)."""
+    if old == new:
+        return state
+    source = {name: i for i, name in enumerate(old)}
+    columns = [source.get(name) for name in new]
+
+    def remap(track: Track) -> Track:
+        probs = np.array([track.class_probs[i] if i is not None else 0.0 for i in columns])
+        total = float(probs.sum())
+        if total <= 0.0:
+            probs = np.array([1.0 if name == track.cls else 0.0 for name in new])
+            total = float(probs.sum()) or 1.0
+        return replace(track, class_probs=probs / total)
+
+    tracks = {key: remap(track) for key, track in state.tracks.items()}
+    return MHFState(state.clusters, tracks, state.time, state.next_key, state.existence)
+
+
+def _unique_labels(objects: list[WorldObject]) -> list[WorldObject]:
+    """A label names one object of the world: where two carry it, the more likely (then
+    the more recently seen) keeps it and the other is listed without a label."""
+    holder: dict[str, WorldObject] = {}
+    for obj in objects:
+        if obj.label is None:
+            continue
+        other = holder.get(obj.label)
+        if other is None or (obj.existence, obj.last_seen) > (other.existence, other.last_seen):
+            holder[obj.label] = obj
+    return [
+        o if o.label is None or holder[o.label] is o else replace(o, label=None) for o in objects
+    ]

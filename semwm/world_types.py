@@ -10,9 +10,13 @@ class WorldObject:
     """An object of the maximum a posteriori hypothesis, predicted to the query time.
 
     ``covariance`` is the position covariance (m^2); ``velocity`` is ``None`` for
-    classes whose filter has no velocity; ``existence`` is the total probability of
-    the hypotheses that hold this object; ``mode_probabilities`` maps each motion
-    model of an IMM to its probability.
+    classes whose filter has no velocity; ``existence`` is the probability that the
+    object exists (over every hypothesis: ``sum_h p(h) r_h(o)``); ``mode_probabilities``
+    maps each motion model of an IMM to its probability; ``class_probabilities`` the
+    probability of each class being its true class (``mht`` model; classes below
+    0.001 left out), ``cls`` being the most specific class holding half of it. ``id``
+    is stable while the object lives; an object below the publishing threshold that a
+    query asked for (``min_existence``) has a provisional negative id.
     """
 
     id: int
@@ -25,6 +29,7 @@ class WorldObject:
     last_seen: float
     created: float
     mode_probabilities: dict[str, float] | None
+    class_probabilities: dict[str, float] | None = None
 
     def to_dict(self) -> dict[str, object]:
         data = asdict(self)
@@ -45,13 +50,15 @@ class WorldState:
 
 @dataclass(frozen=True)
 class HypothesisObject:
-    """An object of a hypothesis: its public id if it was ever published, its track."""
+    """An object of a hypothesis: its public id if it was ever published, its track, and
+    its existence probability in this hypothesis (``mht``; 1 under ``paper``)."""
 
     id: int | None
     track: int
     cls: str
     label: str | None
     position: tuple[float, ...]
+    existence: float = 1.0
 
     def to_dict(self) -> dict[str, object]:
         data = asdict(self)
@@ -61,10 +68,16 @@ class HypothesisObject:
 
 @dataclass(frozen=True)
 class HypothesisSummary:
-    """One hypothesis: its probability and its objects."""
+    """One hypothesis: its probability (and its log10, which does not round to 0) and its
+    objects."""
 
     probability: float
+    log10_probability: float
     objects: tuple[HypothesisObject, ...]
 
     def to_dict(self) -> dict[str, object]:
-        return {"probability": self.probability, "objects": [o.to_dict() for o in self.objects]}
+        return {
+            "probability": self.probability,
+            "log10_probability": self.log10_probability,
+            "objects": [o.to_dict() for o in self.objects],
+        }

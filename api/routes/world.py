@@ -71,10 +71,20 @@ def get_world(
         Query(description="Only objects within r metres of a point: 'x,y,r' or 'x,y,z,r'."),
     ] = None,
     label: Annotated[str | None, Query(description="Only objects with this label.")] = None,
+    min_existence: Annotated[
+        float | None,
+        Query(
+            gt=0.0,
+            le=1.0,
+            description="Only objects at least this likely to exist (default: the knowledge's "
+            "world.min_existence, 0.5).",
+        ),
+    ] = None,
 ) -> WorldOut:
-    """The objects of the most probable hypothesis, predicted to ``time``."""
+    """The objects of the world (each at least ``min_existence`` likely to exist over the
+    whole hypothesis set), predicted to ``time``."""
     centre = parse_near(near) if near is not None else None
-    state = world.world(time=time, cls=cls, near=centre, label=label)
+    state = world.world(time=time, cls=cls, near=centre, label=label, min_existence=min_existence)
     return WorldOut.model_validate(state.to_dict())
 
 
@@ -101,7 +111,7 @@ def get_hypotheses(
     limit: Annotated[int, Query(ge=1, le=1000, description="How many, best first.")] = 10,
 ) -> HypothesesOut:
     """The ``limit`` most probable hypotheses with their probabilities and objects."""
-    total, summaries = world.hypotheses(limit)
+    counts, summaries = world.hypotheses(limit)
     return HypothesesOut(
-        total=total, hypotheses=[HypothesisOut.model_validate(h.to_dict()) for h in summaries]
+        **counts, hypotheses=[HypothesisOut.model_validate(h.to_dict()) for h in summaries]
     )

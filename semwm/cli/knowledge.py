@@ -89,7 +89,7 @@ def validate_command(args: argparse.Namespace) -> int:
             print(f"{file}: {error}" if isinstance(error, OSError) else str(error))
             status = EXIT_INVALID
             continue
-        for problem in analysis.problems:
+        for problem in (*analysis.problems, *analysis.warnings):
             print(problem)
         if analysis.knowledge is None:
             status = EXIT_INVALID

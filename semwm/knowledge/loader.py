@@ -25,6 +25,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ValidationError
 from pydantic_core import ErrorDetails
 
+from semwm.knowledge.advice import advice
 from semwm.knowledge.model import Knowledge, KnowledgeDocument
 from semwm.knowledge.problems import KnowledgeError, Path, Problem
 from semwm.knowledge.resolve import resolve
@@ -73,6 +74,9 @@ class Analysis:
     problems: tuple[Problem, ...]
     document: KnowledgeDocument | None
     knowledge: Knowledge | None
+    warnings: tuple[Problem, ...] = ()
+    """Usable knowledge that will likely not do what its author wants
+    (:func:`semwm.knowledge.advice.advice`), located."""
 
 
 def line_of(path: Path, lines: LineMap) -> int | None:
@@ -258,7 +262,11 @@ def analyse_text(content: str | bytes, fmt: Format, source: str | None = None) -
         for p in problems
     ]
     located.sort(key=lambda p: p.line or 0)
-    return Analysis(tuple(located), document, knowledge if not located else None)
+    warnings: list[Problem] = []
+    if knowledge is not None and not located:
+        warnings = [p.located(source, line_of(p.path, lines)) for p in advice(knowledge)]
+        warnings.sort(key=lambda p: p.line or 0)
+    return Analysis(tuple(located), document, knowledge if not located else None, tuple(warnings))
 
 
 def analyse_file(path: str | FilePath) -> Analysis:

@@ -53,21 +53,39 @@ class WorldSettings(Frozen):
     max_hypotheses
         n_hyp,max: at most this many hypotheses are kept (paper 000 uses 1000).
     association_model
-        ``paper``: the scaled likelihood of paper 002 eq. (8) with frequency priors
-        (eqs. 5-7). ``mht``: the standard MHT model (innovation density N(z; Hx, S),
-        clutter and birth rates spread over ``region``).
+        ``mht`` (the default): each object has an existence probability (a Bernoulli
+        track, as in JIPDA and PMBM trackers), clutter and birth rates are spread over
+        the detectors' coverage, an existing object's likelihood is the predicted
+        measurement density N(z; Hx, S) times its class likelihood. ``paper``: paper
+        002's literal model, the scaled likelihood of eq. (8) with frequency priors
+        (eqs. 5-7) and no existence probabilities (it keeps an empty world with most
+        rates; kept to reproduce the paper).
     missed_detection_term
-        ``mht`` only: multiply each hypothesis by exp(-dt * sum f_existing) for the time
-        its objects went undetected (the Poisson missed-detection term), so duplicates
-        and unconfirmed objects lose probability while unseen. ``false`` reproduces
-        paper 002's behaviour, where only P_max removes them.
+        ``mht`` only: an object that goes undetected while it could be seen loses
+        existence (rate f_existing: P(no detection in dt | exists) = exp(-f dt)).
+        ``false`` reproduces paper 002's behaviour, where only P_max removes objects.
+    min_existence
+        ``mht`` only: the world lists objects whose existence probability is at least
+        this (queries may ask for another threshold).
+    removal_existence
+        ``mht`` only: an object whose existence falls below this is removed from every
+        hypothesis (1e-5, as PMBM trackers prune Bernoulli components). It must stay
+        well below a new object's first existence b / (b + c), or new objects are
+        removed before their second detection (``semwm knowledge validate`` warns).
+    label_gate
+        Distance (m) within which a labelled detection may update the object holding
+        its label even outside the Mahalanobis gate (paper 000: a robot's own report).
+    label_error_rate
+        Probability that a detection's label is wrong: the prior weight of a labelled
+        detection being another object than the one holding the label.
     gate_probability
         Mahalanobis gate: an object further than the chi-square quantile of this
         probability from a detection spawns no association. 1.0 disables gating.
     region
-        The observation region as one ``[min, max]`` pair per axis (metres); its
-        volume spreads clutter and new objects in the ``mht`` model. Optional for
-        ``paper``.
+        The observation region as one ``[min, max]`` pair per axis (metres): objects
+        exist inside it (one predicted out of it is removed) and, under ``mht``,
+        clutter and new objects are spread over it unless a detector states its own
+        coverage (``range``, ``field_of_view``).
     default_detector
         Detector assumed when a detection names none; defaults to the first detector.
     """
@@ -75,8 +93,12 @@ class WorldSettings(Frozen):
     dimension: Literal[2, 3] = 3
     pruning_ratio: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.01
     max_hypotheses: Annotated[int, Field(ge=1)] = 1000
-    association_model: Literal["paper", "mht"] = "paper"
+    association_model: Literal["paper", "mht"] = "mht"
     missed_detection_term: bool = True
+    min_existence: Annotated[float, Field(gt=0.0, le=1.0)] = 0.5
+    removal_existence: Annotated[float, Field(gt=0.0, lt=1.0)] = 1e-5
+    label_gate: Positive = 2.0
+    label_error_rate: Annotated[float, Field(gt=0.0, lt=1.0)] = 1e-3
     gate_probability: Annotated[float, Field(gt=0.0, le=1.0)] = 0.9999
     region: tuple[tuple[float, float], ...] | None = None
     default_detector: str | None = None
@@ -127,7 +149,9 @@ FilterSpec = Annotated[KalmanFilterSpec | IMMFilterSpec, Field(discriminator="ty
 class AppearanceRelation(Frozen):
     """ "A <class> appears within ``max_distance`` of a ``target`` every 1/frequency s".
 
-    Paper 002 eq. (4): f_new(o, h) = max over o' in h of f_presence(o, o').
+    Paper 002 eq. (4): f_new(o, h) = max over o' in h of f_presence(o, o'). As a
+    disappearance relation (``disappearance``), the mirror: an object of the class
+    within ``max_distance`` of a ``target`` leaves at ``frequency`` (Hz).
     """
 
     target: str
@@ -166,6 +190,14 @@ class ClassSpec(Frozen):
         eigenvalue above this (m^2) is removed from every hypothesis.
     max_time_without_update
         Paper 000 C3: an object not updated for this long (s) is removed.
+    leave_frequency
+        ``mht``: the rate (Hz) at which an object of this class leaves the world
+        anywhere (its existence decays at this rate even where no sensor sees it);
+        default 0.01 (an average stay of 100 s). 0 means objects never leave: one
+        that certainly exists then never loses existence by going unseen.
+    disappearance
+        ``mht``: disappearance relations, the mirror of ``appearance`` ("people leave
+        through doors"): near a target the object leaves at the relation's rate.
     category
         Paper 004's object category.
     """
@@ -181,6 +213,8 @@ class ClassSpec(Frozen):
     initial_velocity_covariance: Matrix | None = None
     max_position_variance: Positive | None = None
     max_time_without_update: Positive | None = None
+    leave_frequency: NonNegative | None = None
+    disappearance: tuple[AppearanceRelation, ...] | None = None
     category: Category | None = None
 
 
@@ -195,13 +229,24 @@ class DetectorSpec(Frozen):
         Per-class R overriding the class's own, class name -> d x d (m^2).
     range
         Paper 000 C2: detections farther than this (m) from the sensor position
-        are not used.
+        are not used. With ``field_of_view`` it is the detector's coverage, over
+        which ``clutter_frequency`` is spread when it is smaller than the region.
+    field_of_view
+        Opening angle of the detector (degrees, 0 < fov <= 360), with ``range``.
+    confusion_rate
+        ``mht``: how often (relative to a correct report) this detector reports a
+        class confusable with the true one (a sibling, or a subclass of a generic
+        object). Compatible reports (the class or a superclass) count 1, classes
+        with no common ancestor 0 (paper 002 eq. 8 is the limit confusion_rate = 0).
     """
 
     name: str
     clutter_frequency: NonNegative
     measurement_noise: Mapping[str, Matrix] = Field(default_factory=dict)
     range: Positive | None = None
+    field_of_view: Annotated[float, Field(gt=0.0, le=360.0)] | None = None
+    confusion_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.05
+    unrelated_confusion_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.01
 
 
 class KnownObject(Frozen):
@@ -239,6 +284,8 @@ class ResolvedClass(Frozen):
     initial_velocity_covariance: Matrix
     max_position_variance: float | None
     max_time_without_update: float | None
+    leave_frequency: float
+    disappearance: tuple[AppearanceRelation, ...]
     category: Category | None
 
 

@@ -20,6 +20,9 @@ class Problem:
     path: Path = ()
     file: str | None = None
     line: int | None = None
+    severity: str = "error"
+    """``error`` (the knowledge cannot be used) or ``warning`` (it can, but it will
+    likely not do what its author wants)."""
 
     def located(self, file: str | None, line: int | None) -> Problem:
         return replace(self, file=file, line=line)
@@ -30,7 +33,8 @@ class Problem:
             where = f"{where}:{self.line}"
         field = ".".join(str(p) for p in self.path)
         suffix = f" (at {field})" if field else ""
-        return f"{where}: {self.message}{suffix}"
+        kind = "warning: " if self.severity == "warning" else ""
+        return f"{where}: {kind}{self.message}{suffix}"
 
 
 class KnowledgeError(ValueError):

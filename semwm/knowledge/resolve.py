@@ -34,11 +34,18 @@ INHERITED_FIELDS = (  # what a class takes from its is-a parents when it leaves 
     "initial_velocity_covariance",
     "max_position_variance",
     "max_time_without_update",
+    "leave_frequency",
+    "disappearance",
     "category",
 )
 _REQUIRED = ("detection_frequency", "filter", "measurement_noise")
 DEFAULT_NEW_FREQUENCY = 0.1
 """Hz; base rate of new objects when no class in the chain sets one."""
+DEFAULT_LEAVE_FREQUENCY = 0.01
+"""Hz; objects leave at this rate (an average stay of 100 s) when no class in the chain
+sets one. Without any leave rate an object that certainly exists never loses existence
+by going unseen (semwm.mhf.existence); with it, an object unseen where it would be seen
+at rate f drops below existence 0.5 after about ln(f / mu) / f seconds."""
 DEFAULT_VELOCITY_VARIANCE = 1.0
 """m^2/s^2 per axis; initial velocity variance when no class in the chain sets one."""
 
@@ -225,15 +232,16 @@ def _resolve(
 
     for i, spec in enumerate(specs):
         problems += _class_spec_problems(spec, dim, ("classes", i))
-        for j, relation in enumerate(spec.appearance or ()):
-            if relation.target not in index:
-                problems.append(
-                    Problem(
-                        f"appearance relation of {spec.name!r} targets unknown class "
-                        f"{relation.target!r}; known classes: {known_classes}",
-                        ("classes", i, "appearance", j, "target"),
+        for kind in ("appearance", "disappearance"):
+            for j, relation in enumerate(getattr(spec, kind) or ()):
+                if relation.target not in index:
+                    problems.append(
+                        Problem(
+                            f"{kind} relation of {spec.name!r} targets unknown class "
+                            f"{relation.target!r}; known classes: {known_classes}",
+                            ("classes", i, kind, j, "target"),
+                        )
                     )
-                )
 
     resolved: dict[str, ResolvedClass] = {}
     for i, spec in enumerate(specs):
@@ -278,6 +286,12 @@ def _resolve(
             ),
             max_position_variance=values["max_position_variance"],
             max_time_without_update=values["max_time_without_update"],
+            leave_frequency=(
+                values["leave_frequency"]
+                if values["leave_frequency"] is not None
+                else DEFAULT_LEAVE_FREQUENCY
+            ),
+            disappearance=values["disappearance"] or (),
             category=values["category"],
         )
 
@@ -302,6 +316,20 @@ def _resolve(
             )
         elif any(low >= high for low, high in region):
             problems.append(Problem("region pairs must have min < max", ("world", "region")))
+    if document.world.association_model == "mht" and (
+        document.world.region is None or len(document.world.region) == dim
+    ):
+        for i, detector in enumerate(document.detectors):
+            if detector.range is None and document.world.region is None:
+                problems.append(
+                    Problem(
+                        f"detector {detector.name!r} has no range and the world no region: the "
+                        "mht model spreads its clutter_frequency over the area it sees; give "
+                        "the detector a range (and field_of_view) from its datasheet, or set "
+                        "world.region to the area the robot works in",
+                        ("detectors", i),
+                    )
+                )
     for i, known in enumerate(document.known_objects):
         if known.cls not in index:
             problems.append(

@@ -13,11 +13,21 @@ Two association models (``world.association_model``):
     clutter ``f_clutter / F``, new ``f_new(o, h) / F``, existing
     ``f_existing(C(o)) / F * L_class * exp(-1/2 delta^T Sigma^-1 delta)`` with
     ``delta = z - H x+`` (the updated position) and ``Sigma = R``.
-``mht`` (the standard MHT model)
-    the same rates, but spread in space: clutter and base births uniform over the
-    region (density ``1 / V``), births from an appearance relation uniform over the
-    disc (ball) of its ``max_distance``, and an existing object's likelihood the
-    predicted measurement density ``N(z; H x-, S)`` of its filter.
+``mht`` (the default: a track-oriented MHT with existence probabilities)
+    the same rates, but spread in space: clutter uniform over its detector's
+    coverage (density ``f_c / V_c``), base births uniform over the region
+    (``f_new / V``), births from an appearance relation uniform over the disc
+    (ball) of its ``max_distance``. A detection no known object takes is *one*
+    option, "new or clutter", of weight ``lambda_c + lambda_b``: it starts an object
+    with existence ``lambda_b / (lambda_c + lambda_b)`` that later detections confirm
+    or its misses deny (:mod:`semwm.mhf.existence`), so no new object is pruned
+    before the evidence decides. An existing object ``o`` with existence ``r`` takes
+    it with weight ``r f_e(o) L_class(o, z) N(z; H x-, S)``, ``L_class`` from the
+    object's class distribution and the detector's confusion model
+    (:mod:`semwm.mhf.classes`). A labelled detection can update the object holding
+    its label within ``label_gate`` even outside the Mahalanobis gate, and any other
+    explanation pays the prior ``label_error_rate`` (paper 000 III-B made a
+    likelihood).
 """
 
 from __future__ import annotations
@@ -27,15 +37,21 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from semwm.filters.batched import mahalanobis_squared
 from semwm.filters.factory import FilterFactory
 from semwm.filters.motion import FloatArray
+from semwm.knowledge.coverage import birth_volume, coverage_volume
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
+from semwm.mhf.classes import ClassModel
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted, conform
 from semwm.mhf.state import Track
+
+BoolArray = npt.NDArray[np.bool_]
+IndexArray = npt.NDArray[np.intp]
 
 
 @dataclass(frozen=True)
@@ -92,12 +108,34 @@ class Associator:
             from scipy.stats import chi2
 
             self.gate = float(chi2.ppf(p, self.dim))
-        region = knowledge.world.region
-        self.log_volume = (
-            sum(math.log(high - low) for low, high in region) if region is not None else 0.0
+        world = knowledge.world
+        self.clutter_log_density: dict[str, float] = {}
+        for name, detector in knowledge.detectors.items():
+            volume = coverage_volume(detector, world)
+            self.clutter_log_density[name] = -math.log(volume) if volume else 0.0
+        births = birth_volume(world, tuple(knowledge.detectors.values()))
+        self.log_volume = math.log(births) if births else 0.0
+        if self.model == "mht" and births is None:
+            raise ValueError(
+                "association_model 'mht' needs world.region or a detector range, to spread "
+                "clutter and new objects over space"
+            )
+
+        can_appear = [
+            name
+            for name, spec in knowledge.classes.items()
+            if spec.new_frequency > 0.0 or spec.appearance
+        ]
+        self.class_model = ClassModel(
+            taxonomy,
+            {
+                name: (d.confusion_rate, d.unrelated_confusion_rate)
+                for name, d in knowledge.detectors.items()
+            },
+            can_appear,
         )
-        if self.model == "mht" and region is None:
-            raise ValueError("association_model 'mht' needs world.region (to spread clutter)")
+        self.label_gate = knowledge.world.label_gate
+        self.log_label_error = math.log(knowledge.world.label_error_rate)
 
     def _spread(self, radius: float) -> float:
         """Log spatial density of a birth within ``radius`` (mht model), else 0."""
@@ -108,10 +146,13 @@ class Associator:
         predicted: Predicted,
         measurements: Sequence[Measurement],
         new_key: Callable[[], int],
+        existence: Sequence[float] = (),
     ) -> list[DetectionOptions]:
+        """Every detection's options against the predicted objects; ``existence`` is each
+        predicted object's existence probability (``mht``)."""
         tracks = predicted.tracks
         classes = self.knowledge.classes
-        existing = self._existing(predicted, measurements, new_key)
+        existing = self._existing(predicted, measurements, new_key, existence)
         spread_uniform = -self.log_volume if self.model == "mht" else 0.0
         result = []
         new_states = self._new_states(measurements)
@@ -141,10 +182,19 @@ class Associator:
                         presence[track.key] = (relation.frequency, log_num)
             presence = {k: v for k, v in presence.items() if v[1] > base_log}
             x, P, mu = new_states[j]
+            if self.model == "mht":
+                class_probs = self.class_model.initial(m.detector, m.cls)
+                cls = self.class_model.published(class_probs)
+                if cls != m.cls:
+                    x, P, mu = conform(
+                        x, P, mu, self.factory.filter_for(m.cls), self.factory.filter_for(cls)
+                    )
+            else:
+                class_probs, cls = self.class_model.point(m.cls), m.cls
             new_track = Track(
                 new_key(),
                 m.seq,
-                m.cls,
+                cls,
                 m.label,
                 x,
                 P,
@@ -152,13 +202,15 @@ class Associator:
                 m.time,
                 m.time,
                 m.time,
-                resolved.detection_frequency,
+                classes[cls].detection_frequency,
+                class_probs,
             )
             result.append(
                 DetectionOptions(
                     measurement=m,
                     clutter_rate=m.clutter_rate,
-                    log_clutter=_log(m.clutter_rate) + spread_uniform,
+                    log_clutter=_log(m.clutter_rate)
+                    + (self.clutter_log_density[m.detector] if self.model == "mht" else 0.0),
                     new_track=new_track,
                     new_rate=base_rate,
                     new_log=base_log,
@@ -187,8 +239,19 @@ class Associator:
     def _class_likelihoods(
         self, tracks: Sequence[Track], measurements: Sequence[Measurement]
     ) -> FloatArray:
-        """L_class of eq. (8) for every (detection, object) pair, ``(D, T)``, evaluated once
-        per pair of distinct classes."""
+        """L_class for every (detection, object) pair, ``(D, T)``.
+
+        ``paper``: eq. (8), 0/1 from the taxonomy, once per pair of distinct classes.
+        ``mht``: ``sum_c p_o(c) L(C(z) | c)`` from each object's class distribution and
+        the detection's detector (:mod:`semwm.mhf.classes`).
+        """
+        if self.model == "mht":
+            probs = np.stack([t.class_probs for t in tracks])  # (T, K)
+            columns = np.stack(
+                [self.class_model.likelihood(m.detector, m.cls) for m in measurements]
+            )  # (D, K)
+            mixed: FloatArray = columns @ probs.T
+            return mixed
         track_classes = sorted({t.cls for t in tracks})
         detection_classes = sorted({m.cls for m in measurements})
         table = np.array(
@@ -204,22 +267,41 @@ class Associator:
         result: FloatArray = table[rows[:, None], cols[None, :]]
         return result
 
+    def _label_pairs(
+        self, predicted: Predicted, measurements: Sequence[Measurement], diff: FloatArray
+    ) -> BoolArray:
+        """``(D, T)``: the object holds the detection's label and is within ``label_gate``
+        (paper 000: a robot's own report decides which object it is)."""
+        tracks = predicted.tracks
+        same = np.array(
+            [[m.label is not None and t.label == m.label for t in tracks] for m in measurements],
+            dtype=bool,
+        )
+        if not same.any():
+            return same
+        close: BoolArray = (diff * diff).sum(-1) <= self.label_gate**2
+        result: BoolArray = same & close
+        return result
+
     def _existing(
         self,
         predicted: Predicted,
         measurements: Sequence[Measurement],
         new_key: Callable[[], int],
+        existence: Sequence[float] = (),
     ) -> list[dict[int, tuple[Track, float, float]]]:
         """Gate every (detection, object) pair and update the pairs that pass."""
         tracks = predicted.tracks
         found: list[dict[int, tuple[Track, float, float]]] = [{} for _ in measurements]
         if not tracks or not measurements:
             return found
+        mht = self.model == "mht"
         z = np.stack([m.z for m in measurements])  # (D, d)
         R = np.stack([m.R for m in measurements])  # (D, d, d)
         likelihood = self._class_likelihoods(tracks, measurements)  # (D, T): eq. (8)
-        candidate = likelihood > 0.0
         diff = z[:, None, :] - predicted.position[None, :, :]  # (D, T, d)
+        labelled = self._label_pairs(predicted, measurements, diff) if mht else None
+        candidate = likelihood > 0.0
         if math.isfinite(self.gate):
             # Cheap bound first: d^2 <= gate * lambda_max(S) <= gate * trace(S).
             bound = self.gate * (
@@ -227,12 +309,16 @@ class Associator:
                 + np.trace(R, axis1=1, axis2=2)[:, None]
             )
             candidate &= (diff * diff).sum(-1) <= bound
+            if labelled is not None:
+                candidate |= labelled & (likelihood > 0.0)
         jj, ii = np.nonzero(candidate)
         if jj.size == 0:
             return found
         S = predicted.position_covariance[ii] + R[jj]
         d2 = mahalanobis_squared(diff[jj, ii], S)
         passed = d2 <= self.gate
+        if labelled is not None:
+            passed |= labelled[jj, ii]
         jj, ii = jj[passed], ii[passed]
         by_class: dict[str, list[int]] = {}
         for p, i in enumerate(ii):
@@ -251,11 +337,31 @@ class Associator:
                 x_hat, _ = flt.combine(x_new, P_new, mu_new)
                 delta = z[rows_j] - x_hat[:, :d]
                 log_lik = -0.5 * mahalanobis_squared(delta, R[rows_j])
+            elif labelled is not None and labelled[rows_j, rows_i].any():
+                log_lik = self._label_robust(
+                    log_lik, labelled[rows_j, rows_i], diff, rows_j, rows_i, predicted, R
+                )
+            if mht:  # Bayes over the class distribution (semwm.mhf.classes)
+                prior = np.stack([tracks[i].class_probs for i in rows_i])
+                columns = np.stack(
+                    [
+                        self.class_model.likelihood(measurements[j].detector, measurements[j].cls)
+                        for j in rows_j
+                    ]
+                )
+                posteriors = prior * columns
+                posteriors /= posteriors.sum(axis=1, keepdims=True)
+                names = self.class_model.names
+                refined_all = [names[k] for k in self.class_model.published_many(posteriors)]
             for row, (i, j) in enumerate(zip(rows_i, rows_j, strict=True)):
                 old = tracks[i]
                 m = measurements[j]
-                refined = self.taxonomy.most_specific(old.cls, m.cls)
                 xs, Ps, mus = x_new[row], P_new[row], mu_new[row]
+                if mht:
+                    class_probs, refined = posteriors[row], refined_all[row]
+                else:  # eq. (8): the more specific of two compatible classes
+                    refined = self.taxonomy.most_specific(old.cls, m.cls)
+                    class_probs = self.class_model.point(refined)
                 if refined != old.cls:
                     xs, Ps, mus = conform(xs, Ps, mus, flt, self.factory.filter_for(refined))
                 rate = classes[refined].detection_frequency
@@ -271,10 +377,40 @@ class Associator:
                     m.time,
                     old.created,
                     rate,
+                    class_probs,
                 )
                 log_num = _log(old.rate) + math.log(likelihood[j, i]) + float(log_lik[row])
+                if mht:
+                    log_num += _log(existence[i]) if existence else 0.0
+                    if m.label is not None and old.label not in (None, m.label):
+                        log_num += self.log_label_error
                 found[j][old.key] = (updated, log_num, rate - old.rate)
         return found
+
+    def _label_robust(
+        self,
+        log_lik: FloatArray,
+        labelled: BoolArray,
+        diff: FloatArray,
+        rows_j: IndexArray,
+        rows_i: IndexArray,
+        predicted: Predicted,
+        R: FloatArray,
+    ) -> FloatArray:
+        """For a detection and the object holding its label: the likelihood mixed with a
+        wide component (standard deviation ``label_gate / 3`` per axis), so that a
+        robot's own precise report far from its lagging estimate still fits it."""
+        d = self.dim
+        wide_var = (self.label_gate / 3.0) ** 2
+        S_wide = predicted.position_covariance[rows_i] + R[rows_j] + wide_var * np.eye(d)
+        delta = diff[rows_j, rows_i]
+        _, logdet = np.linalg.slogdet(S_wide)
+        log_wide = -0.5 * (
+            mahalanobis_squared(delta, S_wide) + logdet + d * math.log(2.0 * math.pi)
+        )
+        mixed = np.logaddexp(log_lik + math.log(0.9), log_wide + math.log(0.1))
+        result: FloatArray = np.where(labelled, mixed, log_lik)
+        return result
 
 
 def _distance(z: FloatArray, position: Sequence[float]) -> float:

@@ -4,14 +4,20 @@ One call processes one scan (detections with the same source and time):
 
 1. every stored object version is predicted to the scan time (lazily: from its
    own last update, batched per class filter);
-2. objects that became too uncertain (P_max, paper 002 III-E) or went unseen too
-   long (paper 000 C3) are removed from every hypothesis;
-3. the scan's options are computed once (:mod:`semwm.mhf.association`);
-4. detection by detection, every hypothesis is expanded into clutter, a new
-   object, and each gated existing object it holds (eq. 1 in log space), the
+2. ``mht``: every version's existence is carried to the scan time and every
+   hypothesis weighted by its objects' missed-detection likelihoods
+   (:mod:`semwm.mhf.existence`);
+3. objects that became too uncertain (P_max, paper 002 III-E), went unseen too
+   long (paper 000 C3), left the region or whose existence fell below
+   ``removal_existence`` are removed from every hypothesis;
+4. the scan's options are computed once (:mod:`semwm.mhf.association`);
+5. detection by detection, every hypothesis is expanded into its children (eq. 1
+   in log space): ``paper``: clutter, a new object, each gated existing object;
+   ``mht``: "new object or clutter" (one child: an object with existence
+   ``lambda_b / (lambda_b + lambda_c)``) and each gated existing object. The
    labeling rules of paper 000 III-B are applied, identical hypotheses merged and
    the tree pruned (eq. 3 and n_hyp,max);
-5. object versions no hypothesis refers to are dropped.
+6. object versions no hypothesis refers to are dropped.
 
 The filter is pure: it returns a new :class:`MHFState` and never changes one.
 """
@@ -27,6 +33,7 @@ from semwm.filters.factory import FilterFactory
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf.association import Associator, DetectionOptions
+from semwm.mhf.existence import inside_probability, near_rate, survive
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted, predict_tracks
 from semwm.mhf.prune import merge, prune
@@ -52,6 +59,8 @@ class _TrackTable:
                 self.by_label.setdefault(track.label, set()).add(track.key)
         self._unlabeled: dict[int, int] = {}
         self.fresh: set[int] = set()
+        self.existence: dict[int, float] = dict(state.existence)
+        self.births: dict[tuple[int, float], Track] = {}
         self.origin: dict[int, int] = {key: key for key in self.tracks}
         self.derived: dict[int, list[int]] = {}
         self.copies: dict[int, int] = {}  # pre-scan version -> its copy without label
@@ -61,8 +70,15 @@ class _TrackTable:
         self.next_key += 1
         return key
 
-    def add(self, track: Track, origin: int | None = None, fresh: bool = False) -> None:
+    def add(
+        self,
+        track: Track,
+        origin: int | None = None,
+        fresh: bool = False,
+        existence: float = 1.0,
+    ) -> None:
         self.tracks[track.key] = track
+        self.existence[track.key] = existence
         if track.label is not None:
             self.by_label.setdefault(track.label, set()).add(track.key)
         if fresh:
@@ -77,7 +93,7 @@ class _TrackTable:
         done = self._unlabeled.get(key)
         if done is None:
             copy = self.tracks[key].relabeled(self.new_key(), None)
-            self.add(copy, self.origin.get(key), fresh=key in self.fresh)
+            self.add(copy, self.origin.get(key), key in self.fresh, self.existence[key])
             done = self._unlabeled[key] = copy.key
             if key not in self.fresh and self.origin.get(key) == key:
                 self.copies[key] = copy.key
@@ -95,18 +111,86 @@ class MultipleHypothesisFilter:
         self.ratio = knowledge.world.pruning_ratio
         self.max_hypotheses = knowledge.world.max_hypotheses
         world = knowledge.world
-        self.missed_detections = world.association_model == "mht" and world.missed_detection_term
+        self.mht = world.association_model == "mht"
+        self.missed_detections = self.mht and world.missed_detection_term
+        self.region = world.region
+        self.removal_existence = world.removal_existence if self.mht else 0.0
+        self._leave_relations = {
+            name: tuple(
+                (np.asarray(known.position, dtype=float), relation.max_distance, relation.frequency)
+                for relation in spec.disappearance
+                for known in knowledge.known_objects
+                if known.cls in self.taxonomy.covers(relation.target)
+            )
+            for name, spec in knowledge.classes.items()
+        }
 
     def predict(self, state: MHFState, keys: Sequence[int], time: float) -> Predicted:
         return predict_tracks([state.tracks[k] for k in keys], time, self.factory)
 
-    def leaving(self, predicted: Predicted, time: float) -> set[int]:
+    def rates(self, predicted: Predicted) -> tuple[np.ndarray, np.ndarray]:
+        """Leave rates mu and detection rates f (Hz) of predicted objects (``mht``).
+
+        mu: the class's ``leave_frequency``, or a disappearance relation's rate near its
+        target; f: the class's ``detection_frequency`` times the probability that the
+        object is inside the region (no sensor sees outside it), 0 without the
+        missed-detection term.
+        """
+        classes = self.knowledge.classes
+        mu = np.array(
+            [
+                near_rate(
+                    predicted.position[i],
+                    classes[t.cls].leave_frequency,
+                    self._leave_relations[t.cls],
+                )
+                for i, t in enumerate(predicted.tracks)
+            ]
+        )
+        if not self.missed_detections:
+            return mu, np.zeros(len(predicted.tracks))
+        inside = inside_probability(predicted.position, predicted.position_covariance, self.region)
+        f = np.array([classes[t.cls].detection_frequency for t in predicted.tracks]) * inside
+        return mu, f
+
+    def existence_at(
+        self, state: MHFState, predicted: Predicted, time: float
+    ) -> tuple[dict[int, float], dict[int, float]]:
+        """Existence of every predicted version at ``time`` (>= ``state.time``) with no
+        detection since ``state.time``, and the log missed-detection likelihood of each."""
+        r = np.array([state.existence.get(t.key, 1.0) for t in predicted.tracks])
+        if not self.mht or state.time is None or time <= state.time or not predicted.tracks:
+            keys = [t.key for t in predicted.tracks]
+            return dict(zip(keys, r.tolist(), strict=True)), {}
+        mu, f = self.rates(predicted)
+        r_new, log_q = survive(r, mu, f, time - state.time)
+        keys = [t.key for t in predicted.tracks]
+        return (
+            dict(zip(keys, r_new.tolist(), strict=True)),
+            dict(zip(keys, log_q.tolist(), strict=True)),
+        )
+
+    def leaving(
+        self, predicted: Predicted, time: float, existence: Mapping[int, float] | None = None
+    ) -> set[int]:
         """Keys of objects to remove from every hypothesis at ``time``: position covariance
-        above the class's P_max (paper 002 III-E) or unseen longer than its maximum (C3)."""
+        above the class's P_max (paper 002 III-E), unseen longer than its maximum (C3),
+        and (``mht``) existence inside the region below ``removal_existence``."""
         gone: set[int] = set()
         if not predicted.tracks:
             return gone
-        largest = np.linalg.eigvalsh(predicted.position_covariance)[:, -1]
+        if self.mht and existence is not None:
+            inside = inside_probability(
+                predicted.position, predicted.position_covariance, self.region
+            )
+            for i, track in enumerate(predicted.tracks):
+                if existence.get(track.key, 1.0) * inside[i] < self.removal_existence:
+                    gone.add(track.key)
+        finite = np.all(np.isfinite(predicted.position_covariance), axis=(1, 2))
+        for row in np.flatnonzero(~finite):
+            gone.add(predicted.tracks[int(row)].key)
+        covariance = np.where(finite[:, None, None], predicted.position_covariance, 0.0)
+        largest = np.linalg.eigvalsh(covariance)[:, -1]
         classes = self.knowledge.classes
         for i, track in enumerate(predicted.tracks):
             spec = classes.get(track.cls)
@@ -127,21 +211,29 @@ class MultipleHypothesisFilter:
         if not measurements:
             return state
         time = measurements[0].time
-        table = _TrackTable(state)
         keys = list(state.tracks)
         predicted = self.predict(state, keys, time)
-        gone = self.leaving(predicted, time)
+        existence, log_q = self.existence_at(state, predicted, time)
         clusters: Sequence[Cluster] = state.clusters
+        if log_q:
+            clusters = self.undetected(clusters, log_q, state.tracks)
+        state = MHFState(tuple(clusters), state.tracks, state.time, state.next_key, existence)
+        table = _TrackTable(state)
+        gone = self.leaving(predicted, time, existence)
         if gone:
             clusters = self.without(clusters, gone, table.tracks)
             alive = [i for i, k in enumerate(keys) if k not in gone]
             predicted = _subset(predicted, alive)
-        if self.missed_detections and state.time is not None and time > state.time:
-            clusters = self._undetected(clusters, time - state.time, table.tracks)
-        options = self.associator.options(predicted, measurements, table.new_key)
+        options = self.associator.options(
+            predicted,
+            measurements,
+            table.new_key,
+            [existence[t.key] for t in predicted.tracks],
+        )
         book = _ClusterBook(clusters)
         for option in options:
-            table.add(option.new_track, fresh=True)
+            if not self.mht:
+                table.add(option.new_track, fresh=True)
             for old_key, (updated, _, _) in option.existing.items():
                 table.add(updated, origin=old_key, fresh=True)
             if self.factorised:
@@ -157,19 +249,21 @@ class MultipleHypothesisFilter:
         final = book.clusters()
         referenced: set[int] = set().union(*(c.keys for c in final))
         tracks = {k: table.tracks[k] for k in referenced}
-        return MHFState(final, tracks, time, table.next_key)
+        kept = {k: table.existence.get(k, 1.0) for k in referenced}
+        return MHFState(final, tracks, time, table.next_key, kept)
 
-    def _undetected(
-        self, clusters: Sequence[Cluster], elapsed: float, tracks: Mapping[int, Track]
+    def undetected(
+        self,
+        clusters: Sequence[Cluster],
+        log_q: Mapping[int, float],
+        tracks: Mapping[int, Track],
     ) -> tuple[Cluster, ...]:
-        r"""The ``mht`` model's missed-detection term: objects detected at rates f_e (Hz) that
-        produced no detection for ``elapsed`` seconds.
+        r"""Weight every hypothesis by the missed-detection likelihoods of its objects.
 
-        .. math:: p(\text{no detection in } \Delta t \mid h) = \exp(-\Delta t \sum_{o \in h} f_e(o))
+        .. math:: p(h \mid \text{no detection}) \propto p(h) \prod_{o \in h} q_o
 
-        Clutter and birth rates are the same in every hypothesis and cancel; this term
-        is what makes a hypothesis with a duplicate or an unconfirmed object less
-        probable while it is not seen. It factorises over clusters.
+        with :math:`q_o` from :func:`semwm.mhf.existence.survive`. A cluster with one
+        hypothesis is unchanged (normalised on its own).
         """
         result = []
         for cluster in clusters:
@@ -178,7 +272,8 @@ class MultipleHypothesisFilter:
                 continue
             hypotheses = prune(
                 merge(
-                    (h.tracks, h.log_weight - elapsed * h.rate, h.rate) for h in cluster.hypotheses
+                    (h.tracks, h.log_weight + math.fsum(log_q[k] for k in h.tracks), h.rate)
+                    for h in cluster.hypotheses
                 ),
                 self.ratio,
                 self.max_hypotheses,
@@ -266,13 +361,28 @@ class MultipleHypothesisFilter:
                 taken = tracks & fresh
                 open_rate = h.rate - sum(table.tracks[k].rate for k in taken) if taken else h.rate
                 log_norm -= math.log(option.clutter_rate + birth_rate + open_rate)
-            if option.log_clutter > -math.inf:
-                children.append((tracks, log_norm + option.log_clutter, h.rate))
-            if birth_log > -math.inf:
-                child = tracks | {new_key}
-                if label is not None:
-                    child = _give_label(child, new_key, label, table)
-                children.append((child, log_norm + birth_log, h.rate + new_rate))
+            if self.mht:
+                # one child "new object or clutter": an object with existence
+                # lambda_b / (lambda_b + lambda_c), weight lambda_b + lambda_c
+                log_unassigned = float(np.logaddexp(option.log_clutter, birth_log))
+                if label is not None and table.by_label.get(label, set()) & tracks:
+                    log_unassigned += self.associator.log_label_error
+                if birth_log > -math.inf:
+                    born = self._birth(option, birth_log, table)
+                    child = tracks | {born}
+                    if label is not None:
+                        child = _give_label(child, born, label, table)
+                    children.append((child, log_norm + log_unassigned, h.rate + new_rate))
+                elif log_unassigned > -math.inf:
+                    children.append((tracks, log_norm + log_unassigned, h.rate))
+            else:
+                if option.log_clutter > -math.inf:
+                    children.append((tracks, log_norm + option.log_clutter, h.rate))
+                if birth_log > -math.inf:
+                    child = tracks | {new_key}
+                    if label is not None:
+                        child = _give_label(child, new_key, label, table)
+                    children.append((child, log_norm + birth_log, h.rate + new_rate))
             for k in existing_keys & tracks:
                 updated, log_num, rate_change = existing[k]
                 child = (tracks - {k}) | {updated.key}
@@ -289,6 +399,23 @@ class MultipleHypothesisFilter:
         if not children:  # nothing can explain it: a knowledge base with no clutter or births
             return tuple(hypotheses)
         return prune(merge(children), self.ratio, self.max_hypotheses)
+
+    def _birth(self, option: DetectionOptions, birth_log: float, table: _TrackTable) -> int:
+        """The version a detection starts with birth weight ``birth_log`` (``mht``): its
+        existence is ``lambda_b / (lambda_b + lambda_c)``. Hypotheses whose objects make
+        a birth likelier (eq. 4) start a version of their own."""
+        born = table.births.get((option.new_track.key, birth_log))
+        if born is None:
+            log_total = float(np.logaddexp(option.log_clutter, birth_log))
+            first = not any(key == option.new_track.key for key, _ in table.births)
+            born = (
+                option.new_track
+                if first
+                else option.new_track.relabeled(table.new_key(), option.new_track.label)
+            )
+            table.add(born, fresh=True, existence=math.exp(birth_log - log_total))
+            table.births[(option.new_track.key, birth_log)] = born
+        return born.key
 
 
 class _ClusterBook:

@@ -29,13 +29,18 @@ class Track:
         Identity of the object across versions: the sequence number of the
         detection that created it. Public ids are given to lineages.
     cls
-        The most specific class the associated detections support.
+        The published class: the most specific class the associated detections
+        support (``mht``: the most specific class holding half of ``class_probs``);
+        the class whose filter tracks it.
     x, P, mu
         Filter state at ``time``: ``(M, n)``, ``(M, n, n)``, ``(M,)``.
     last_seen
         Time of the last detection associated with it (s).
     rate
         f_existing of its class (Hz), paper 002 eq. (6).
+    class_probs
+        ``(K,)`` probability of each class of the knowledge (sorted by name) being
+        its true class (:mod:`semwm.mhf.classes`).
     """
 
     key: int
@@ -49,6 +54,7 @@ class Track:
     last_seen: float
     created: float
     rate: float
+    class_probs: FloatArray
 
     def relabeled(self, key: int, label: str | None) -> Track:
         return Track(
@@ -63,6 +69,7 @@ class Track:
             self.last_seen,
             self.created,
             self.rate,
+            self.class_probs,
         )
 
 
@@ -100,16 +107,18 @@ class Cluster:
 @dataclass(frozen=True)
 class MHFState:
     """The whole filter: independent clusters of hypotheses (each most probable first,
-    normalised) and the track table."""
+    normalised), the track table, and each version's existence probability at
+    ``time`` (:mod:`semwm.mhf.existence`; 1 for every version under ``paper``)."""
 
     clusters: tuple[Cluster, ...]
     tracks: Mapping[int, Track]
     time: float | None
     next_key: int
+    existence: Mapping[int, float]
 
     @staticmethod
     def empty() -> MHFState:
-        return MHFState((), {}, None, 0)
+        return MHFState((), {}, None, 0, {})
 
     @property
     def best(self) -> Hypothesis:
@@ -126,8 +135,15 @@ class MHFState:
 
     @property
     def hypothesis_count(self) -> int:
-        """Number of global hypotheses (product of the clusters' counts)."""
-        return math.prod(len(c.hypotheses) for c in self.clusters)
+        """Number of hypotheses stored: the sum of the clusters' counts (the global
+        hypotheses are their combinations; see :attr:`log10_joint_count`)."""
+        return sum(len(c.hypotheses) for c in self.clusters)
+
+    @property
+    def log10_joint_count(self) -> float:
+        """log10 of the number of global hypotheses (the product of the clusters'
+        counts, which can have thousands of digits)."""
+        return math.fsum(math.log10(len(c.hypotheses)) for c in self.clusters)
 
     def top(self, k: int) -> list[Hypothesis]:
         """The ``k`` most probable global hypotheses, best first.

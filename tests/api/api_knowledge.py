@@ -17,7 +17,12 @@ def kalman(q: float = 1e-4) -> dict[str, Any]:
 
 
 DOCUMENT: dict[str, Any] = {
-    "world": {"dimension": 2, "pruning_ratio": 0.01, "max_hypotheses": 50},
+    "world": {
+        "dimension": 2,
+        "pruning_ratio": 0.01,
+        "max_hypotheses": 50,
+        "region": [[-20.0, 20.0], [-20.0, 20.0]],
+    },
     "classes": [
         {
             "name": "Can",

@@ -25,8 +25,10 @@ def test_world_holds_every_object_with_its_fields(seeded: TestClient) -> None:
     cup = objects["Cup"]
     assert set(cup) == {
         "id", "class", "label", "position", "velocity", "covariance",
-        "existence", "last_seen", "created", "mode_probabilities",
+        "existence", "last_seen", "created", "mode_probabilities", "class_probabilities",
     }  # fmt: skip
+    assert cup["class_probabilities"]["Cup"] > 0.9
+    assert sum(cup["class_probabilities"].values()) == pytest.approx(1.0, abs=0.01)
     assert cup["position"] == pytest.approx([1.0, 2.0], abs=1e-6)
     assert cup["velocity"] is None and cup["mode_probabilities"] is None
     assert cup["last_seen"] == 2.5
@@ -85,7 +87,12 @@ def test_hypotheses(seeded: TestClient) -> None:
     assert probabilities == sorted(probabilities, reverse=True)
     best = body["hypotheses"][0]["objects"]
     assert {o["class"] for o in best} == {"Cup", "CokeCan", "Robot"}
-    assert set(best[0]) == {"id", "track", "class", "label", "position"}
+    assert set(best[0]) == {"id", "track", "class", "label", "position", "existence"}
+    assert body["clusters"] >= 1
+    # the joint count is the product of the clusters' counts, never above total^clusters
+    assert 0.0 <= body["log10_joint"] <= body["clusters"] * math.log10(body["total"]) + 1e-9
+    for h in body["hypotheses"]:
+        assert h["log10_probability"] == pytest.approx(math.log10(h["probability"]))
 
 
 BAD_QUERIES = [

@@ -249,6 +249,6 @@ def class_filter(s: Scenario) -> ClassFilter:
                 initial_velocity_covariance=_matrix(s.P0_vel),
             ),
         ),
-        detectors=(DetectorSpec(name="camera", clutter_frequency=0.1),),
+        detectors=(DetectorSpec(name="camera", clutter_frequency=0.1, range=10.0),),
     )
     return FilterFactory(resolve(document)).filter_for("Thing")

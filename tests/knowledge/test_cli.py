@@ -13,7 +13,7 @@ from semwm.knowledge.shipped import shipped_knowledge_path
 
 BROKEN = """\
 world:
-  dimension: 2
+  {dimension: 2, region: [[0, 10], [0, 10]]}
 classes:
   - name: Cup
     is_a: [Mug]

@@ -28,7 +28,7 @@ classes:
     is_a: [Cat]
     max_time_without_update: 5.0
 detectors:
-  - {name: eye, clutter_frequency: 0.1}
+  - {name: eye, clutter_frequency: 0.1, range: 8.0}
 """
 
 

@@ -18,7 +18,7 @@ VALID_XML = """\
 <?xml version="1.0" encoding="UTF-8"?>
 <knowledge>
   <world>
-    <dimension>2</dimension>
+    <dimension>2</dimension><region><matrix>0 10; 0 10</matrix></region>
   </world>
   <object>
     <class>Thing</class>
@@ -50,7 +50,7 @@ VALID_XML = """\
 
 VALID_YAML = """\
 world:
-  dimension: 2
+  {dimension: 2, region: [[0, 10], [0, 10]]}
 classes:
   - name: Thing
     detection_frequency: 1.0
@@ -310,8 +310,8 @@ YAML_CASES = {
         "transition matrix row 2 must sum to 1",
     ),
     "unknown default detector": Case(
-        "  dimension: 2\n",
-        "  dimension: 2\n  default_detector: radar\n",
+        "  {dimension: 2, region: [[0, 10], [0, 10]]}\n",
+        "  {dimension: 2, region: [[0, 10], [0, 10]],\n   default_detector: radar}\n",
         "default_detector:",
         "unknown detector 'radar'",
     ),

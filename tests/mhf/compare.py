@@ -16,16 +16,36 @@ Hyp = tuple[float, list[tuple[int, str, str | None, tuple[float, ...]]]]
 
 def real_hypotheses(wm: WorldModel) -> list[Hyp]:
     return [
-        (h.probability, sorted((o.track, o.cls, o.label, o.position) for o in h.objects))
+        (
+            h.probability,
+            sorted((o.track, o.cls, o.label, (*o.position, o.existence)) for o in h.objects),
+        )
         for h in wm.hypotheses(10**9)
     ]
 
 
 def ref_hypotheses(ref: ReferenceMHF) -> list[Hyp]:
+    """The reference's hypotheses; an object's 'position' carries its existence last."""
     return [
-        (h.p, sorted((o.lineage, o.cls, o.label, tuple(float(v) for v in o.x)) for o in h.objects))
+        (
+            h.p,
+            sorted((o.lineage, o.cls, o.label, (*(float(v) for v in o.x), o.r)) for o in h.objects),
+        )
         for h in ref.hypotheses
     ]
+
+
+def published(ref: ReferenceMHF, floor: float) -> list[tuple[int, str]]:
+    """(lineage, class) of the objects whose existence over all hypotheses (sum of p times
+    existence inside the region) is at least ``floor``, each in the version of the most
+    probable hypothesis holding it."""
+    totals: dict[int, float] = {}
+    chosen: dict[int, str] = {}
+    for h in sorted(ref.hypotheses, key=lambda h: -h.p):
+        for o in h.objects:
+            totals[o.lineage] = totals.get(o.lineage, 0.0) + h.p * o.r * ref.inside(o)
+            chosen.setdefault(o.lineage, o.cls)
+    return sorted((lin, chosen[lin]) for lin, total in totals.items() if total >= floor)
 
 
 def _same_objects(a: Hyp, b: Hyp, tol: float) -> bool:
@@ -43,7 +63,11 @@ def assert_same_hypotheses(real: Sequence[Hyp], ref: Sequence[Hyp], tol: float =
     left = list(ref)
     for hyp in real:
         match = next(
-            (i for i, r in enumerate(left) if abs(r[0] - hyp[0]) <= tol and _same_objects(hyp, r, tol)),
+            (
+                i
+                for i, r in enumerate(left)
+                if abs(r[0] - hyp[0]) <= tol and _same_objects(hyp, r, tol)
+            ),
             None,
         )
         assert match is not None, (

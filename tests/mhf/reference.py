@@ -21,9 +21,20 @@ Probabilities (model ``paper``), for a parent ``h`` and
   within ``max_distance`` (eq. 4),
 * existing ``o``: ``f_existing(C(o)) / F * exp(-1/2 d^T R^-1 d)``, ``d = z - x+``.
 
-Model ``mht``: no per-parent ``F``; clutter ``f_clutter / V``, new ``f_new / V`` (or
-``f_presence / (pi r^2)`` for a relation of radius r, whichever is larger), existing
-``f_existing * N(z; x-, P- + R)``.
+Model ``mht`` (existence per object, class distribution per object): no per-parent
+``F``; one child "new or clutter" of weight ``f_clutter / V + f_new / V`` (``f_new``
+from eq. 4 as above, spread over the disc of a relation), times ``label_error_rate``
+when a labelled detection meets a hypothesis in which an object holds that label; it
+starts an object with existence ``b / (b + c)``; existing ``o``: ``r_o * f_existing *
+L_class * N(z; x-, P- + R)`` (times ``label_error_rate`` for another label; for the
+object holding the detection's label within ``label_gate``, N is 0.9 N(S) + 0.1 N(S +
+(label_gate / 3)^2 I)). Between scans every object's existence decays and every
+hypothesis is weighted by its objects' missed-detection probabilities q (rates
+f_existing times the probability of being inside the region); objects with existence
+times that probability below ``removal_existence`` are removed. Class distributions
+use L(reported | true) = 1 (reported is true or a superclass), ``confusion_rate``
+(a common ancestor), ``unrelated_confusion_rate`` (none); the class is the most
+specific one whose subtree holds more than half.
 
 Then Bayes (eq. 1): children normalised over all parents; pruned by ratio alpha
 (eq. 3) after each detection. Objects whose largest position variance exceeds
@@ -62,6 +73,8 @@ class RefObject:
     P: np.ndarray
     time: float
     last_seen: float
+    r: float = 1.0
+    probs: tuple[tuple[str, float], ...] = ()
 
     @property
     def identity(self) -> tuple[int, tuple[int, ...], str | None]:
@@ -119,6 +132,58 @@ class ReferenceMHF:
     def f_existing(self, cls: str) -> float:
         return self.k.classes[cls].detection_frequency
 
+    # -------------------------------------------------------------- mht pieces
+    def related(self, a: str, b: str) -> bool:
+        return bool(({a} | self.ancestors(a)) & ({b} | self.ancestors(b)))
+
+    def confusion(self, reported: str, true: str) -> float:
+        if self.is_a(true, reported):
+            return 1.0
+        if self.related(true, reported):
+            return self.detector.confusion_rate
+        return self.detector.unrelated_confusion_rate
+
+    def initial_probs(self, reported: str) -> dict[str, float]:
+        can = [c for c, spec in self.k.classes.items() if spec.new_frequency > 0 or spec.appearance]
+        w = {c: self.confusion(reported, c) for c in can}
+        total = sum(w.values())
+        return {c: v / total for c, v in w.items()}
+
+    def published(self, probs: dict[str, float]) -> str:
+        names = sorted(self.k.classes)
+        mass = {n: sum(p for c, p in probs.items() if self.is_a(c, n)) for n in names}
+        candidates = [n for n in names if mass[n] > 0.5 + 1e-12]
+        depth = {n: len(self.ancestors(n)) for n in names}
+        if not candidates:  # no class holds more than half: the most probable one
+            return max(names, key=lambda n: (probs.get(n, 0.0), -names.index(n)))
+        return max(candidates, key=lambda n: (depth[n], mass[n], -names.index(n)))
+
+    def inside(self, o: RefObject) -> float:
+        region = self.k.world.region
+        if region is None:
+            return 1.0
+        p = 1.0
+        for axis, (lo, hi) in enumerate(region):
+            sd = math.sqrt(o.P[axis, axis])
+            cdf = lambda v: 0.5 * (1.0 + math.erf(v / math.sqrt(2.0)))  # noqa: E731
+            p *= cdf((hi - o.x[axis]) / sd) - cdf((lo - o.x[axis]) / sd)
+        return p
+
+    def decay(self, o: RefObject, dt: float) -> tuple[RefObject, float]:
+        """Existence after dt with no detection, and q = P(no detection)."""
+        mu = self.k.classes[o.cls].leave_frequency
+        f = self.f_existing(o.cls) * self.inside(o)
+        stay = math.exp(-(mu + f) * dt)
+        left = mu / (mu + f) * (1.0 - stay) if mu + f > 0 else 0.0
+        q = (1.0 - o.r) + o.r * (stay + left)
+        return replace(o, r=o.r * stay / q), q
+
+    @staticmethod
+    def density(y: np.ndarray, S: np.ndarray) -> float:
+        return math.exp(-0.5 * float(y @ np.linalg.inv(S) @ y)) / math.sqrt(
+            (2 * math.pi) ** len(y) * np.linalg.det(S)
+        )
+
     # -------------------------------------------------------------- pieces
     def predict(self, o: RefObject, t: float) -> RefObject:
         dt = t - o.time
@@ -142,7 +207,11 @@ class ReferenceMHF:
         best = spec.new_frequency / (self.volume if self.model == "mht" else 1.0)
         for rel in spec.appearance:
             value = rel.frequency / (math.pi * rel.max_distance**2 if self.model == "mht" else 1.0)
-            targets = [np.array(k.position, float) for k in self.k.known_objects if self.is_a(k.cls, rel.target)]
+            targets = [
+                np.array(k.position, float)
+                for k in self.k.known_objects
+                if self.is_a(k.cls, rel.target)
+            ]
             targets += [o.x for o in before if self.is_a(o.cls, rel.target)]
             if any(np.linalg.norm(z.z - pos) <= rel.max_distance for pos in targets):
                 best = max(best, value)
@@ -164,16 +233,20 @@ class ReferenceMHF:
         merged: dict[frozenset, RefHypothesis] = {}
         for h in self.hypotheses:
             objects = [self.predict(o, t) for o in h.objects]
+            p = h.p
+            if self.model == "mht" and self.time is not None and t > self.time:
+                decayed = [self.decay(o, t - self.time) for o in objects]
+                objects = [o for o, _ in decayed]
+                p *= math.prod(q for _, q in decayed)
             objects = [o for o in objects if not self.leaving(o, t)]
+            if self.model == "mht":
+                floor = self.k.world.removal_existence
+                objects = [o for o in objects if o.r * self.inside(o) >= floor]
             key = frozenset(o.identity for o in objects)
             if key in merged:
-                merged[key].p += h.p
+                merged[key].p += p
             else:
-                merged[key] = RefHypothesis(h.p, objects)
-        if self.model == "mht" and self.time is not None and t > self.time:
-            # Poisson missed-detection term: no object of h was detected for t - time seconds
-            for h in merged.values():
-                h.p *= math.exp(-(t - self.time) * sum(self.f_existing(o.cls) for o in h.objects))
+                merged[key] = RefHypothesis(p, objects)
         self.time = t
         # each hypothesis: (p, objects, lineages that already took a detection of this scan)
         current = [(h.p, h.objects, set(), list(h.objects)) for h in merged.values()]
@@ -187,16 +260,41 @@ class ReferenceMHF:
                 f_c = self.detector.clutter_frequency
                 f_new = self.birth(z, before)
                 if self.model == "paper":
-                    F = f_c + f_new + sum(
-                        self.f_existing(o.cls)
-                        for o in objs
-                        if self.f_counts_taken or o.lineage not in taken
+                    F = (
+                        f_c
+                        + f_new
+                        + sum(
+                            self.f_existing(o.cls)
+                            for o in objs
+                            if self.f_counts_taken or o.lineage not in taken
+                        )
                     )
                     w_clutter, w_new = f_c / F, f_new / F
                 else:
                     F = 1.0
                     w_clutter = f_c / self.volume
                     w_new = f_new
+                    held = z.label is not None and any(o.label == z.label for o in objs)
+                    w = (w_clutter + w_new) * (self.k.world.label_error_rate if held else 1.0)
+                    probs = self.initial_probs(z.cls)
+                    new = RefObject(
+                        z.seq,
+                        (z.seq,),
+                        self.published(probs),
+                        z.label,
+                        z.z.copy(),
+                        np.array(self.k.classes[z.cls].initial_covariance, float),
+                        t,
+                        t,
+                        r=w_new / (w_clutter + w_new),
+                        probs=tuple(sorted(probs.items())),
+                    )
+                    if w_new > 0:
+                        kids = self.relabel([*objs, new], len(objs), z.label)
+                        children.append((p * w, kids, taken | {z.seq}, before))
+                    elif w > 0:
+                        children.append((p * w, objs, taken, before))
+                    w_clutter = w_new = 0.0
                 if w_clutter > 0:
                     children.append((p * w_clutter, objs, taken, before))
                 if w_new > 0:
@@ -213,7 +311,9 @@ class ReferenceMHF:
                     kids = self.relabel([*objs, new], len(objs), z.label)
                     children.append((p * w_new, kids, taken | {z.seq}, before))
                 for i, o in enumerate(objs):
-                    if o.lineage in taken or not self.compatible(o.cls, z.cls):
+                    if o.lineage in taken:
+                        continue
+                    if self.model == "paper" and not self.compatible(o.cls, z.cls):
                         continue
                     S = o.P + R
                     K = o.P @ np.linalg.inv(S)
@@ -224,13 +324,28 @@ class ReferenceMHF:
                         delta = z.z - x_post
                         lik = math.exp(-0.5 * float(delta @ Rinv @ delta))
                         w = self.f_existing(o.cls) / F * lik
+                        refined = o.cls if self.is_a(o.cls, z.cls) else z.cls
+                        probs_post: tuple[tuple[str, float], ...] = ()
                     else:
                         y = z.z - o.x
-                        dens = math.exp(-0.5 * float(y @ np.linalg.inv(S) @ y)) / math.sqrt(
-                            (2 * math.pi) ** len(y) * np.linalg.det(S)
+                        dens = self.density(y, S)
+                        gate = self.k.world.label_gate
+                        if z.label is not None and o.label == z.label and np.linalg.norm(y) <= gate:
+                            wide = S + (gate / 3.0) ** 2 * np.eye(len(y))
+                            dens = 0.9 * dens + 0.1 * self.density(y, wide)
+                        old_probs = dict(o.probs)
+                        l_class = sum(
+                            p_c * self.confusion(z.cls, c) for c, p_c in old_probs.items()
                         )
-                        w = self.f_existing(o.cls) * dens
-                    refined = o.cls if self.is_a(o.cls, z.cls) else z.cls
+                        w = o.r * self.f_existing(o.cls) * l_class * dens
+                        if z.label is not None and o.label not in (None, z.label):
+                            w *= self.k.world.label_error_rate
+                        post = {
+                            c: p_c * self.confusion(z.cls, c) / l_class
+                            for c, p_c in old_probs.items()
+                        }
+                        refined = self.published(post)
+                        probs_post = tuple(sorted(post.items()))
                     updated = RefObject(
                         o.lineage,
                         (*o.history, z.seq),
@@ -240,6 +355,8 @@ class ReferenceMHF:
                         P_post,
                         t,
                         t,
+                        r=1.0,
+                        probs=probs_post,
                     )
                     kids = list(objs)
                     kids[i] = updated

@@ -26,7 +26,9 @@ def _hyps(wm: WorldModel) -> dict[tuple, float]:
     out: dict[tuple, float] = {}
     for h in wm.hypotheses(10**6):
         key = tuple(
-            sorted((o.track, o.cls, o.label, tuple(round(v, 9) for v in o.position)) for o in h.objects)
+            sorted(
+                (o.track, o.cls, o.label, tuple(round(v, 9) for v in o.position)) for o in h.objects
+            )
         )
         assert key not in out
         out[key] = h.probability
@@ -66,9 +68,10 @@ def test_first_detection_clutter_or_new() -> None:
     assert hyps[(_obj(0, "Cup", (1.0, 2.0)),)] == pytest.approx(FN / (FC + FN), abs=1e-12)
 
 
-@pytest.mark.parametrize("model", ["paper", "mht"])
-def test_second_detection_five_hypotheses(model: str) -> None:
-    """Paper 000 III-A: a second detection near the first gives five hypotheses."""
+def test_second_detection_five_hypotheses() -> None:
+    """Paper 000 III-A: a second detection near the first gives five hypotheses (the
+    paper model; mht: test_second_detection_mht)."""
+    model = "paper"
     z1, z2, dt = np.array([1.0, 2.0]), np.array([1.2, 1.9]), 2.0
     wm = _cup_world(model)
     wm.ingest(det(0.0, "Cup", *z1))
@@ -87,20 +90,6 @@ def test_second_detection_five_hypotheses(model: str) -> None:
             "clutter,new": p_cl1 * FN / F0,
             "clutter,clutter": p_cl1 * FC / F0,
         }
-    else:
-        V = 40.0
-        dens = math.exp(-0.5 * y @ np.linalg.inv(S) @ y) / (2 * math.pi * math.sqrt(np.linalg.det(S)))
-        p_new1, p_cl1 = FN / (FC + FN), FC / (FC + FN)  # both spread by 1/V
-        # missed-detection term: the object born at the first detection was not detected
-        # for dt seconds: p_new1 is multiplied by exp(-FE dt) before the second detection
-        p_new1 *= math.exp(-FE * dt)
-        w = {
-            "new,new": p_new1 * FN / V,
-            "new,same": p_new1 * FE * dens,
-            "new,clutter": p_new1 * FC / V,
-            "clutter,new": p_cl1 * FN / V,
-            "clutter,clutter": p_cl1 * FC / V,
-        }
     total = sum(w.values())
     o1, o2 = _obj(0, "Cup", z1), _obj(1, "Cup", z2)
     expected = {
@@ -116,11 +105,63 @@ def test_second_detection_five_hypotheses(model: str) -> None:
         assert got[key] == pytest.approx(p, abs=1e-12), key
 
 
-def test_first_detection_mht_spreads_over_region() -> None:
-    """mht: clutter and birth both uniform over the region: the same 1/V cancels."""
+def _existence(wm: WorldModel) -> dict[tuple, tuple[float, dict[int, float]]]:
+    """mht: hypotheses keyed by their objects -> (probability, lineage -> existence)."""
+    out = {}
+    for h in wm.hypotheses(10**6):
+        key = tuple(
+            sorted(
+                (o.track, o.cls, o.label, tuple(round(v, 9) for v in o.position)) for o in h.objects
+            )
+        )
+        out[key] = (h.probability, {o.track: o.existence for o in h.objects})
+    return out
+
+
+def test_first_detection_mht_is_one_object_of_existence_b_over_b_plus_c() -> None:
+    """mht: one child "new or clutter": one hypothesis holding an object whose existence
+    is lambda_b / (lambda_b + lambda_c); clutter and birth both spread by 1/V (cancels)."""
     wm = _cup_world("mht")
     wm.ingest(det(0.0, "Cup", 1.0, 2.0))
-    assert _hyps(wm)[()] == pytest.approx(FC / (FC + FN), abs=1e-12)
+    got = _existence(wm)
+    assert list(got) == [(_obj(0, "Cup", (1.0, 2.0)),)]
+    p, existence = got[(_obj(0, "Cup", (1.0, 2.0)),)]
+    assert p == pytest.approx(1.0)
+    assert existence[0] == pytest.approx(FN / (FC + FN), abs=1e-12)
+
+
+def test_second_detection_mht() -> None:
+    """mht: the first object's existence decays over dt unseen (rate FE while inside the
+    region, semwm.mhf.existence), then the second detection either updates it (weight r
+    FE N(z; x, S)) or is new-or-clutter (weight (FC + FN) / V, a second object)."""
+    from scipy.special import ndtr
+
+    z1, z2, dt, V = np.array([1.0, 2.0]), np.array([1.2, 1.9]), 2.0, 40.0
+    wm = _cup_world("mht")
+    wm.ingest(det(0.0, "Cup", *z1))
+    wm.ingest(det(dt, "Cup", *z2, covariance=R_FULL.tolist()))
+    P_pred = P0 * np.eye(2) + dt * QC * np.eye(2)
+    x_post, _, y, S = _kalman(z1, P_pred, z2, R_FULL)
+    sd = math.sqrt(P_pred[0, 0])
+    inside = (ndtr((10 - 1.0) / sd) - ndtr((0 - 1.0) / sd)) * (
+        ndtr((4 - 2.0) / sd) - ndtr(-2.0 / sd)
+    )
+    r0, mu = FN / (FC + FN), 0.01  # mu: the default leave_frequency
+    f = FE * inside
+    stay = math.exp(-(mu + f) * dt)
+    left = mu / (mu + f) * (1 - stay)  # it may have left unseen
+    r1 = r0 * stay / (1 - r0 + r0 * (stay + left))
+    dens = math.exp(-0.5 * y @ np.linalg.inv(S) @ y) / (2 * math.pi * math.sqrt(np.linalg.det(S)))
+    w_same, w_new = r1 * FE * dens, (FC + FN) / V
+    got = _existence(wm)
+    o1, o2 = _obj(0, "Cup", z1), _obj(1, "Cup", z2)
+    assert set(got) == {(_obj(0, "Cup", x_post),), (o1, o2)}
+    p_same, e_same = got[(_obj(0, "Cup", x_post),)]
+    p_two, e_two = got[(o1, o2)]
+    assert p_same == pytest.approx(w_same / (w_same + w_new), abs=1e-12)
+    assert p_two == pytest.approx(w_new / (w_same + w_new), abs=1e-12)
+    assert e_same[0] == pytest.approx(1.0)
+    assert e_two == pytest.approx({0: r1, 1: r0}, abs=1e-12)
 
 
 # ---------------------------------------------------------------- class likelihood
@@ -209,7 +250,9 @@ def _door_world(known=(), model: str = "paper") -> WorldModel:
         knowledge(
             [
                 static_class("Door", f_existing=0.4, f_new=FN, r=R, p0=P0, qc=QC),
-                static_class("Person", f_existing=FE, f_new=FN, r=R, p0=P0, qc=QC, appearance=[relation]),
+                static_class(
+                    "Person", f_existing=FE, f_new=FN, r=R, p0=P0, qc=QC, appearance=[relation]
+                ),
             ],
             f_clutter=FC,
             known=known,
@@ -227,10 +270,13 @@ def test_person_near_known_door(x: float, f_new: float) -> None:
 
 
 def test_person_near_known_door_mht() -> None:
+    """mht: near a mapped door a new person is born at the relation's rate spread over its
+    disc (eq. 4), so its existence is w_new / (w_new + w_clutter)."""
     wm = _door_world(known=[KnownObject(cls="Door", position=(0.0, 0.0))], model="mht")
     wm.ingest(det(0.0, "Person", 0.5, 0.0))
     w_new, w_cl = F_PRES / math.pi, FC / 40.0  # the relation's disc vs the region
-    assert _hyps(wm)[()] == pytest.approx(w_cl / (w_cl + w_new), abs=1e-12)
+    ((p, existence),) = _existence(wm).values()
+    assert existence[0] == pytest.approx(w_new / (w_cl + w_new), abs=1e-12)
 
 
 def test_person_near_tracked_door_in_one_hypothesis_only() -> None:

@@ -51,7 +51,9 @@ def _batches(items, distinct: int = 0) -> list[list[dict[str, Any]]]:
 
 
 @SETTINGS
-@given(items=detections, ratio=st.sampled_from([0.0, 0.01, 0.2]), max_h=st.sampled_from([3, 50, 400]))
+@given(
+    items=detections, ratio=st.sampled_from([0.0, 0.01, 0.2]), max_h=st.sampled_from([3, 50, 400])
+)
 def test_probabilities_sum_to_one_after_every_ingest(items, ratio, max_h) -> None:
     wm = WorldModel(knowledge(_classes(), ratio=ratio, max_hypotheses=max_h, gate=0.9999))
     for batch in _batches(items):
@@ -66,7 +68,12 @@ def test_probabilities_sum_to_one_after_every_ingest(items, ratio, max_h) -> Non
 
 
 @SETTINGS
-@given(items=detections, last=detections, ratio=st.sampled_from([0.01, 0.3]), max_h=st.sampled_from([1, 2, 1000]))
+@given(
+    items=detections,
+    last=detections,
+    ratio=st.sampled_from([0.01, 0.3]),
+    max_h=st.sampled_from([1, 2, 1000]),
+)
 def test_pruning_keeps_the_map(items, last, ratio, max_h) -> None:
     """From the same state, one detection with pruning and without: the same MAP."""
     full = MultipleHypothesisFilter(knowledge(_classes()))
@@ -93,7 +100,13 @@ def test_pruning_keeps_the_map(items, last, ratio, max_h) -> None:
 
 def _id_world() -> WorldModel:
     return WorldModel(
-        knowledge([static_class("Cup", f_existing=2.0, f_new=0.5, qc=0.001)], f_clutter=0.05, gate=0.9999, ratio=0.01, max_hypotheses=200)
+        knowledge(
+            [static_class("Cup", f_existing=2.0, f_new=0.5, qc=0.001)],
+            f_clutter=0.05,
+            gate=0.9999,
+            ratio=0.01,
+            max_hypotheses=200,
+        )
     )
 
 
@@ -240,7 +253,10 @@ def test_out_of_order_beyond_the_window_changes_nothing() -> None:
 
 def _content(wm: WorldModel):
     hyps = sorted(
-        (round(h.probability, 12), sorted((o.cls, o.label, tuple(round(v, 12) for v in o.position)) for o in h.objects))
+        (
+            round(h.probability, 12),
+            sorted((o.cls, o.label, tuple(round(v, 12) for v in o.position)) for o in h.objects),
+        )
         for h in wm.hypotheses(10**6)
     )
     world = sorted((o.cls, o.position, o.covariance, o.last_seen) for o in wm.world().objects)

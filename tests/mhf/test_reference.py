@@ -11,7 +11,13 @@ import pytest
 from semwm.knowledge.model import AppearanceRelation, KnownObject
 from semwm.world import WorldModel
 
-from .compare import assert_same_hypotheses, map_objects, real_hypotheses, ref_hypotheses
+from .compare import (
+    assert_same_hypotheses,
+    map_objects,
+    published,
+    real_hypotheses,
+    ref_hypotheses,
+)
 from .kb import knowledge, static_class
 from .reference import RefDetection, run_reference
 
@@ -20,6 +26,7 @@ REGION = ((-1.0, 5.0), (-1.0, 5.0))
 
 def _taxonomy(rng: np.random.Generator, p_max: float | None) -> tuple[list, dict[str, list[str]]]:
     """Classes and, per leaf class, the classes a detection of it may carry."""
+
     def cls(name: str, **kw: Any):
         return static_class(
             name,
@@ -103,6 +110,12 @@ def test_same_hypotheses_as_reference(seed: int, model: str) -> None:
     ref = run_reference(kb, scans)
     real, expected = real_hypotheses(wm), ref_hypotheses(ref)
     assert_same_hypotheses(real, expected)
+    if model == "mht":  # the world: objects likely to exist over the whole hypothesis set
+        floor = kb.world.min_existence
+        assert sorted(o.cls for o in wm.world().objects) == sorted(
+            c for _, c in published(ref, floor)
+        )
+        return
     best = map_objects(expected)
     if best is not None:
         assert sorted((o.id is not None, o.cls) for o in wm.world().objects) == sorted(
@@ -116,19 +129,31 @@ def _door_scenario(seed: int, model: str):
     one detection per scan."""
     rng = np.random.default_rng(1000 + seed)
     relation = AppearanceRelation(
-        target="Door", max_distance=float(rng.uniform(0.5, 1.5)), frequency=float(rng.uniform(0.5, 3.0))
+        target="Door",
+        max_distance=float(rng.uniform(0.5, 1.5)),
+        frequency=float(rng.uniform(0.5, 3.0)),
     )
     classes = [
-        static_class("Door", f_existing=float(rng.uniform(0.2, 1.0)), f_new=0.1, r=0.05, p0=0.05, qc=0.001),
         static_class(
-            "Person", f_existing=float(rng.uniform(0.5, 2.0)), f_new=0.2, r=0.1, p0=0.1, qc=0.1,
+            "Door", f_existing=float(rng.uniform(0.2, 1.0)), f_new=0.1, r=0.05, p0=0.05, qc=0.001
+        ),
+        static_class(
+            "Person",
+            f_existing=float(rng.uniform(0.5, 2.0)),
+            f_new=0.2,
+            r=0.1,
+            p0=0.1,
+            qc=0.1,
             appearance=[relation],
         ),
     ]
     known = [KnownObject(cls="Door", position=(4.0, 4.0))] if rng.random() < 0.5 else []
     kb = knowledge(
-        classes, f_clutter=float(rng.uniform(0.1, 0.6)), model=model,
-        region=REGION if model == "mht" else None, known=known,
+        classes,
+        f_clutter=float(rng.uniform(0.1, 0.6)),
+        model=model,
+        region=REGION if model == "mht" else None,
+        known=known,
     )
     scans, t = [], 0.0
     for seq in range(int(rng.integers(2, 7))):

@@ -81,9 +81,7 @@ def test_c3_removal_after_max_time_without_update() -> None:
 
 
 def _robots() -> WorldModel:
-    return WorldModel(
-        knowledge([static_class("Robot", f_existing=2.0, f_new=1.0)], f_clutter=0.1)
-    )
+    return WorldModel(knowledge([static_class("Robot", f_existing=2.0, f_new=1.0)], f_clutter=0.1))
 
 
 def _labels(wm: WorldModel) -> list[dict[int, tuple[str | None, tuple[float, ...]]]]:
@@ -100,7 +98,9 @@ def test_labeled_new_object_takes_the_label_unlabeled_has_none() -> None:
             assert h[1][0] is None
 
 
-@pytest.mark.parametrize(("first", "second", "expected"), [("r1", "r2", "r2"), ("r1", None, "r1"), (None, "r2", "r2")])
+@pytest.mark.parametrize(
+    ("first", "second", "expected"), [("r1", "r2", "r2"), ("r1", None, "r1"), (None, "r2", "r2")]
+)
 def test_label_of_an_updated_object(first, second, expected) -> None:
     wm = _robots()
     wm.ingest(det(0.0, "Robot", 0.0, 0.0, label=first))
