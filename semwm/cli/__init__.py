@@ -6,7 +6,9 @@ Commands:
 * ``semwm simulate NAME``: run a simulated scenario (sim1, sim2, robocup) through
   the world model; writes detections, truth, world, metrics and a plot;
 * ``semwm knowledge validate|convert|show``: check, convert (XML <-> YAML) and
-  inspect knowledge files.
+  inspect knowledge files;
+* ``semwm replay|record|journal``: feed a recording or a data dir back through a
+  world model, record to MCAP, export or compact a journal (docs/persistence.md).
 
 ``semwm COMMAND --help`` describes each command's options.
 """

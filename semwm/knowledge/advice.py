@@ -32,6 +32,10 @@ CONFIRMATION_LIMIT = 20
 """Warn when confirming a new object takes more detections than this."""
 
 
+def _ball(radius: float, dim: int) -> float:
+    return math.pi * radius**2 if dim == 2 else 4.0 / 3.0 * math.pi * radius**3
+
+
 def _class_path(knowledge: Knowledge, name: str) -> tuple[str | int, ...]:
     index = next(i for i, c in enumerate(knowledge.document.classes) if c.name == name)
     return ("classes", index)
@@ -99,7 +103,17 @@ def advice(knowledge: Knowledge) -> list[Problem]:
             S = 2.0 * noise  # a new object's covariance is about R
             peak = 1.0 / math.sqrt(np.linalg.det(2.0 * math.pi * S))
             clutter = detector.clutter_frequency / volume
-            birth = spec.new_frequency / births
+            # the likeliest birth: the base rate over the region, or a relation's over its
+            # disc (ball) (eq. 4)
+            birth = max(
+                [spec.new_frequency / births]
+                + [
+                    rel.frequency / _ball(rel.max_distance, world.dimension)
+                    for rel in spec.appearance
+                ]
+            )
+            if birth <= 0.0:
+                continue
             if clutter + birth <= 0.0:
                 continue
             gain = spec.detection_frequency * peak / (clutter + birth) / math.e

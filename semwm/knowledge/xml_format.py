@@ -76,6 +76,10 @@ _WORLD_FIELDS = (
     "max_hypotheses",
     "association_model",
     "missed_detection_term",
+    "min_existence",
+    "removal_existence",
+    "label_gate",
+    "label_error_rate",
     "gate_probability",
     "region",
     "default_detector",
@@ -86,6 +90,7 @@ _CLASS_SCALARS = (
     "new_frequency",
     "max_position_variance",
     "max_time_without_update",
+    "leave_frequency",
     "category",
 )
 _CLASS_MATRICES = ("measurement_noise", "initial_covariance", "initial_velocity_covariance")
@@ -94,6 +99,7 @@ _OBJECT_CHILDREN = (
     "is_a",
     *_CLASS_SCALARS,
     "appearance_model",
+    "disappearance_model",
     "filter",
     *_CLASS_MATRICES,
 )
@@ -105,7 +111,14 @@ _IMM_CHILDREN = (
     "stationary_velocity_variance",
 )
 _RELATION_ATTRIBUTES = ("target", "max_distance", "frequency")
-_DETECTOR_ATTRIBUTES = ("name", "clutter_frequency", "range")
+_DETECTOR_ATTRIBUTES = (
+    "name",
+    "clutter_frequency",
+    "range",
+    "field_of_view",
+    "confusion_rate",
+    "unrelated_confusion_rate",
+)
 _KNOWN_OBJECT_ATTRIBUTES = ("class", "name")
 _SEPARATORS = re.compile(r"[\s,]+")
 
@@ -326,15 +339,22 @@ class _Reader:
             spec["appearance"] = self.appearance(
                 parts["appearance_model"][0], (*path, "appearance")
             )
+        if "disappearance_model" in parts:
+            spec["disappearance"] = self.appearance(
+                parts["disappearance_model"][0], (*path, "disappearance"), "disappearance_relation"
+            )
         if "filter" in parts:
             spec["filter"] = self.filter(parts["filter"][0], (*path, "filter"), spec)
         return spec
 
-    def appearance(self, element: etree._Element, path: Path) -> list[dict[str, Any]]:
+    def appearance(
+        self, element: etree._Element, path: Path, tag: str = "appearance_relation"
+    ) -> list[dict[str, Any]]:
+        """An appearance (or, with ``tag``, disappearance) model's relations."""
         self.record(path, self.line(element))
-        relations = self.children(element, ("appearance_relation",), path, ("appearance_relation",))
+        relations = self.children(element, (tag,), path, (tag,))
         result = []
-        for j, relation in enumerate(relations.get("appearance_relation", [])):
+        for j, relation in enumerate(relations.get(tag, [])):
             where = (*path, j)
             self.record(where, self.line(relation))
             self.check_attributes(relation, _RELATION_ATTRIBUTES, where)
@@ -614,12 +634,15 @@ def _write_class(root: etree._Element, spec: ClassSpec) -> None:
         value = getattr(spec, name)
         if value is not None:
             _add(element, name, value if isinstance(value, str) else _format_number(value))
-    if spec.appearance is not None:
-        model = _add(element, "appearance_model")
-        for relation in spec.appearance:
+    for kind in ("appearance", "disappearance"):
+        relations = getattr(spec, kind)
+        if relations is None:
+            continue
+        model = _add(element, f"{kind}_model")
+        for relation in relations:
             _add(
                 model,
-                "appearance_relation",
+                f"{kind}_relation",
                 target=relation.target,
                 max_distance=_format_number(relation.max_distance),
                 frequency=_format_number(relation.frequency),
@@ -643,8 +666,10 @@ def document_to_xml(document: KnowledgeDocument) -> str:
             "name": detector.name,
             "clutter_frequency": _format_number(detector.clutter_frequency),
         }
-        if detector.range is not None:
-            attributes["range"] = _format_number(detector.range)
+        for name in _DETECTOR_ATTRIBUTES[2:]:
+            value = getattr(detector, name)
+            if value is not None and name in detector.model_fields_set:
+                attributes[name] = _format_number(value)
         element = _add(root, "detector", **attributes)
         for cls, matrix in detector.measurement_noise.items():
             _add_matrix(element, "measurement_noise", matrix, class_=cls)

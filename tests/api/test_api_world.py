@@ -42,11 +42,15 @@ def test_world_holds_every_object_with_its_fields(seeded: TestClient) -> None:
 
 def test_time_predicts_the_objects(seeded: TestClient) -> None:
     now = by_class(seeded.get("/world").json()["objects"])["Robot"]
+    # 2 s unseen at 10 Hz: the robot is now unlikely to exist (not listed by default)
     later_body = seeded.get("/world", params={"time": 4.5}).json()
     assert later_body["time"] == 4.5
+    assert "Robot" not in by_class(later_body["objects"])
+    later_body = seeded.get("/world", params={"time": 2.7}).json()
     later = by_class(later_body["objects"])["Robot"]
     assert later["position"][0] > now["position"][0]  # type: ignore[index]
     assert later["covariance"][0][0] > now["covariance"][0][0]  # type: ignore[index]
+    assert later["existence"] < now["existence"]  # type: ignore[operator]
 
 
 def test_class_filter_is_taxonomy_aware(seeded: TestClient) -> None:

@@ -32,11 +32,13 @@ def test_help_lists_every_command_and_no_stale_text(capsys: pytest.CaptureFixtur
     status, out, _ = run(capsys, "--help")
     assert status == 0
     assert "minimal" not in out and "so far" not in out
-    for command in ("serve", "simulate", "knowledge"):
-        assert f"semwm {command}" in out  # the description
+    commands = ("serve", "simulate", "knowledge", "replay", "record", "journal")
+    for command in commands:
         assert f"\n    {command}" in out  # argparse's list of sub-commands
+    for command in ("serve", "simulate", "knowledge", "replay|record|journal"):
+        assert f"semwm {command}" in out  # the description
     assert "--version" in out and "--log-level" in out
-    assert len(COMMANDS) == 3
+    assert len(COMMANDS) == len(commands)
 
 
 @pytest.mark.parametrize(

@@ -159,3 +159,57 @@ def test_an_unknown_extension_is_a_clear_error(tmp_path: Path) -> None:
         dump_document(document, tmp_path / "x.json")
     with pytest.raises(UnknownFormatError, match=r"expected one of .xml, .yaml, .yml"):
         load_document(tmp_path / "x.txt")
+
+
+EXISTENCE_YAML = """\
+world:
+  dimension: 2
+  region: [[0, 10], [0, 8]]
+  min_existence: 0.6
+  removal_existence: 1.0e-6
+  label_gate: 1.5
+  label_error_rate: 0.002
+classes:
+  - name: Person
+    detection_frequency: 5.0
+    leave_frequency: 0.02
+    appearance:
+      - {target: Door, max_distance: 0.5, frequency: 0.1}
+    disappearance:
+      - {target: Door, max_distance: 0.7, frequency: 2.0}
+    filter:
+      type: kalman
+      model: {motion_model: zeroth_order, system_noise: [[0.01, 0], [0, 0.01]]}
+    measurement_noise: [[0.02, 0], [0, 0.02]]
+  - name: Door
+    is_a: [Person]
+    detection_frequency: 0.1
+    new_frequency: 0.0
+detectors:
+  - name: camera
+    clutter_frequency: 0.5
+    range: 6.0
+    field_of_view: 120
+    confusion_rate: 0.1
+    unrelated_confusion_rate: 0.02
+"""
+
+
+@pytest.mark.parametrize("fmt", ["xml", "yaml"])
+def test_existence_coverage_and_confusion_fields_round_trip(fmt: str) -> None:
+    """The mht model's fields (existence thresholds, label gate, leave rates,
+    disappearance relations, detector coverage and confusion) survive either form."""
+    analysis = analyse_text(EXISTENCE_YAML, "yaml", "existence.yaml")
+    assert analysis.document is not None and not analysis.problems
+    text = document_to_text(analysis.document, fmt)  # type: ignore[arg-type]
+    again = analyse_text(text, fmt, f"existence.{fmt}")  # type: ignore[arg-type]
+    assert not again.problems, again.problems
+    assert again.document == analysis.document
+    knowledge = again.knowledge
+    assert knowledge is not None
+    person = knowledge.classes["Person"]
+    assert person.leave_frequency == 0.02
+    assert person.disappearance[0].frequency == 2.0
+    detector = knowledge.detectors["camera"]
+    assert (detector.field_of_view, detector.confusion_rate) == (120, 0.1)
+    assert knowledge.world.removal_existence == 1e-6
