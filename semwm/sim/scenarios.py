@@ -771,21 +771,18 @@ def tabletop_wrong_labels(
 
 
 def _walk(
-    waypoints: Sequence[tuple[float, float]], speed: float, start: float
-) -> tuple[Callable[[float], tuple[np.ndarray, np.ndarray]], float]:
-    """A smooth walk through ``waypoints`` at ``speed`` starting at time ``start``.
+    waypoints: Sequence[tuple[float, float]], speed: float, start: float, times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """A smooth walk through ``waypoints`` at ``speed`` (m/s) starting at ``start`` (s).
 
-    Returns ``state(t) -> (position, velocity)`` (the walker stands still at the last
-    waypoint once there, before ``start`` at the first) and the time it arrives.
+    Returns the positions and velocities at ``times``, shape ``(len(times), 2)`` (the
+    walker stands still at the first waypoint before ``start`` and at the last once
+    there), and the time it arrives.
     """
     position, velocity, walk = _arc_length_path(waypoints, speed)
-
-    def state(t: float) -> tuple[np.ndarray, np.ndarray]:
-        s = np.asarray(min(max(t - start, 0.0), walk))
-        moving = start <= t <= start + walk
-        return position(s), velocity(s) if moving else np.zeros(2)
-
-    return state, start + walk
+    since = np.clip(times - start, 0.0, walk)
+    moving = ((times >= start) & (times <= start + walk))[:, None]
+    return position(since), np.where(moving, velocity(since), 0.0), start + walk
 
 
 def _inside(position: np.ndarray, region: Region) -> bool:
@@ -863,24 +860,24 @@ def corner_occlusion(
         (right, 2.0),
         (right, end_y),
     )
-    state, arrive = _walk(waypoints, walker_speed, enter_time)
-    duration = arrive + linger
-    times = _frame_times(rate, duration)
+    _, _, arrive = _walk(waypoints, walker_speed, enter_time, np.zeros(1))
+    times = _frame_times(rate, arrive + linger)
+    positions, velocities, _ = _walk(waypoints, walker_speed, enter_time, times)
+    fine = np.arange(enter_time, arrive, 0.01)
+    along, _, _ = _walk(waypoints, walker_speed, enter_time, fine)
     corners = [(left, bottom), (right, bottom)]
     occlusions: list[tuple[float, float]] = []
     for corner in corners:
-        fine = np.arange(enter_time, arrive, 0.01)
-        distances = [np.linalg.norm(state(float(t))[0] - corner) for t in fine]
+        distances = np.linalg.norm(along - np.asarray(corner), axis=1)
         t_corner = float(fine[int(np.argmin(distances))])
         start = t_corner - rng.uniform(0.3, 1.0)
         occlusions.append((round(start, 3), round(start + rng.uniform(*occlusion), 3)))
     truth: list[TruthFrame] = []
     detections: list[Detection] = []
-    for t in times:
+    for t, p, v in zip(times, positions, velocities, strict=True):
         t = float(t)
         objects: tuple[TruthObject, ...] = ()
         if t >= enter_time:
-            p, v = state(t)
             visible = not any(a <= t < b for a, b in occlusions)
             objects = (TruthObject("person", "Person", _pos(p), _pos(v), visible=visible),)
             if visible and rng.random() < detection_probability:
@@ -938,7 +935,8 @@ def door_exits(
     outside = (SIM2_DOOR[0], 8.6)
     doorway = (SIM2_DOOR[0], 7.9)
     hall = (1.2, 6.8)
-    walkers: list[tuple[Callable[[float], tuple[np.ndarray, np.ndarray]], float, float]] = []
+    times = _frame_times(rate, duration)
+    walkers: list[tuple[np.ndarray, np.ndarray, float, float]] = []
     entries = np.sort(rng.uniform(1.0, 0.5 * duration, n))
     for entry in entries:
         stops = _uniform(rng, ((1.5, 9.0), (1.0, 6.5)), int(rng.integers(1, 4)))
@@ -951,19 +949,20 @@ def door_exits(
             doorway,
             outside,
         )
-        state, arrive = _walk(waypoints, float(rng.uniform(*speed)), float(entry))
-        walkers.append((state, float(entry), arrive))
-    times = _frame_times(rate, duration)
+        positions, velocities, arrive = _walk(
+            waypoints, float(rng.uniform(*speed)), float(entry), times
+        )
+        walkers.append((positions, velocities, float(entry), arrive))
     truth: list[TruthFrame] = []
     detections: list[Detection] = []
     visits: list[list[float | None]] = [[None, None] for _ in range(n)]
-    for t in times:
+    for k, t in enumerate(times):
         t = float(t)
         objects = []
-        for i, (state, entry, arrive) in enumerate(walkers):
+        for i, (positions, velocities, entry, arrive) in enumerate(walkers):
             if not entry <= t <= arrive:
                 continue
-            p, v = state(t)
+            p, v = positions[k], velocities[k]
             if not _inside(p, SIM2_REGION):
                 continue
             visits[i][0] = t if visits[i][0] is None else visits[i][0]
@@ -985,7 +984,7 @@ def door_exits(
             "gospa_c": 2.0,
             "door": SIM2_DOOR,
             "visits": visits,
-            "walk_ends": [round(a, 3) for _, _, a in walkers],
+            "walk_ends": [round(a, 3) for _, _, _, a in walkers],
         },
     )
 
