@@ -112,18 +112,17 @@ class TimeLimited:
 
 
 @cache
-def knowledge_for(name: str) -> Knowledge:
-    """The knowledge file the scenario ``name`` is meant for (shipped, or the one
-    its ``metadata["knowledge_dir"]`` names, e.g. ``benchmarks/knowledge``)."""
-    scenario = make_scenario(name, 0, **_tiny(name))
+def knowledge_for(knowledge_file: str, knowledge_dir: str | None) -> Knowledge:
+    """The knowledge file a scenario is meant for: shipped, or in ``knowledge_dir``
+    (its ``metadata["knowledge_dir"]``, e.g. ``benchmarks/knowledge``)."""
+    if knowledge_dir is not None:
+        return load_knowledge(REPOSITORY / knowledge_dir / knowledge_file)
+    return load_knowledge(shipped_knowledge_path(knowledge_file))
+
+
+def _knowledge(scenario: Scenario) -> Knowledge:
     directory = scenario.metadata.get("knowledge_dir")
-    if directory is not None:
-        return load_knowledge(REPOSITORY / str(directory) / scenario.knowledge_file)
-    return load_knowledge(shipped_knowledge_path(scenario.knowledge_file))
-
-
-def _tiny(name: str) -> dict[str, Any]:
-    return {"duration": 1.0} if "duration" in CONFIGS[name].full else {}
+    return knowledge_for(scenario.knowledge_file, None if directory is None else str(directory))
 
 
 def _area(scenario: Scenario) -> float:
@@ -169,11 +168,11 @@ def run_one(task: tuple[str, int, str, bool, float]) -> dict[str, Any]:
     """One (scenario, seed, tracker) run: its row of the per-seed table."""
     name, seed, tracker, quick, limit = task
     config = CONFIGS[name]
-    scenario = make_scenario(name, seed, **(config.quick if quick else config.full))
-    knowledge = knowledge_for(name)
-    factory = _factory(tracker, scenario, knowledge, config.scan_rate, limit)
     start = time.perf_counter()
     try:
+        scenario = make_scenario(name, seed, **(config.quick if quick else config.full))
+        knowledge = _knowledge(scenario)
+        factory = _factory(tracker, scenario, knowledge, config.scan_rate, limit)
         result = run_scenario(scenario, knowledge, progress=False, world_model_factory=factory)
         row = _row(result)
     except TrackerTimeout as e:
@@ -291,13 +290,15 @@ def run(
             for t in TRACKERS
         }
         summary = {t: summarise(r) for t, r in by_tracker.items()}
-        knowledge = knowledge_for(name)
+        sizes = config.quick if quick else config.full
+        scenario0 = make_scenario(name, 0, **sizes)
+        knowledge = _knowledge(scenario0)
         first = next((r for r in by_tracker["semwm"] if r["status"] == "ok"), {})
         doc["scenarios"][name] = {
-            "sizes": config.quick if quick else config.full,
+            "sizes": sizes,
             "knowledge": knowledge.source,
             "association_model": knowledge.world.association_model,
-            "gospa_c": make_scenario(name, 0, **_tiny(name)).metadata.get("gospa_c"),
+            "gospa_c": scenario0.metadata.get("gospa_c"),
             "mean_detections": _mean(by_tracker["semwm"], "n_detections"),
             "duration_s": first.get("duration_s"),
             "summary": summary,

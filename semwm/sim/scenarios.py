@@ -937,7 +937,7 @@ def door_exits(
     hall = (1.2, 6.8)
     times = _frame_times(rate, duration)
     walkers: list[tuple[np.ndarray, np.ndarray, float, float]] = []
-    entries = np.sort(rng.uniform(1.0, 0.5 * duration, n))
+    entries = np.sort(rng.uniform(1.0, max(1.0, 0.5 * duration), n))
     for entry in entries:
         stops = _uniform(rng, ((1.5, 9.0), (1.0, 6.5)), int(rng.integers(1, 4)))
         waypoints = (
