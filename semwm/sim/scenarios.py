@@ -10,6 +10,15 @@ those of the shipped knowledge files (``knowledge/*.yaml``).
 * :func:`robocup`: paper 000, two teams on a 12 x 18 m field, peers reporting their
   own labeled positions and observing every robot within 5 m.
 * :func:`grid`: a static grid of objects all detected in every frame (benchmarks).
+
+Harder variants for the world-quality benchmark (issue 9, ``benchmarks/bench_quality.py``):
+
+* :func:`tabletop_wrong_labels`: an independent table top whose objects are first
+  reported under a wrong sibling class.
+* :func:`corner_occlusion`: a person hidden for 2-4 s while turning a corner of the room.
+* :func:`door_exits`: several people entering and leaving the room through its door.
+* :func:`datasheet`: people and boxes appearing in and leaving a sensor's field of view,
+  meant for a knowledge file written only from the sensor's datasheet.
 """
 
 from __future__ import annotations
@@ -623,11 +632,492 @@ def grid(
     )
 
 
+# --------------------------------------------------------------------------- harder variants
+
+TABLETOP_CLASSES = ("CokeCan", "BeerCan", "Cup")
+"""Classes of :func:`tabletop_wrong_labels` (``knowledge/sim1.yaml``'s taxonomy)."""
+TABLETOP_CONFUSIONS: dict[str, tuple[str, ...]] = {
+    "CokeCan": ("BeerCan",),
+    "BeerCan": ("CokeCan",),
+    "Cup": ("CokeCan", "BeerCan"),
+}
+"""The wrong class a detector reports for each true class: the sibling (the other
+can under ``Can``), for a cup one of the cans (siblings at the top level)."""
+TABLETOP_SUPERCLASS = {"CokeCan": "Can", "BeerCan": "Can"}
+
+
+def _separated_points(
+    rng: np.random.Generator, region: Region, n: int, min_distance: float, margin: float
+) -> np.ndarray:
+    """``n`` uniform points inside ``region`` shrunk by ``margin``, pairwise at least
+    ``min_distance`` apart (rejection sampling, bounded)."""
+    inner: Region = tuple((lo + margin, hi - margin) for lo, hi in region)
+    points: list[np.ndarray] = []
+    for _ in range(1000 * n):
+        candidate = _uniform(rng, inner, 1)[0]
+        if all(np.linalg.norm(candidate - q) >= min_distance for q in points):
+            points.append(candidate)
+            if len(points) == n:
+                return np.asarray(points)
+    raise ValueError(
+        f"cannot place {n} points {min_distance} m apart in {region} with margin {margin}"
+    )
+
+
+def tabletop_wrong_labels(
+    rng: np.random.Generator,
+    *,
+    n_objects: tuple[int, int] = (4, 8),
+    duration: float = 20.0,
+    frame_rate: float = 2.5,
+    detection_probability: float = 0.8,
+    wrong_first: tuple[int, int] = (1, 3),
+    wrong_later_rate: float = 0.05,
+    superclass_rate: float = 0.15,
+    clutter_rate: float = 0.5,
+    noise: float = 0.05,
+    min_separation: float = 0.4,
+    placed_within: float = 5.0,
+    seed: int | None = None,
+) -> Scenario:
+    """A table top whose objects are first reported under a wrong sibling class.
+
+    Tests class lock-in, issue 9 item 4 ("a CokeCan first reported twice as
+    BeerCan becomes a BeerCan object ... and starts a second object 5 cm away"),
+    on a generator independent of :func:`sim1`'s code and layout.
+
+    Between ``n_objects[0]`` and ``n_objects[1]`` static objects (the first a
+    CokeCan, the second a BeerCan, the others drawn from ``TABLETOP_CLASSES``) are
+    put at random places on the table (``SIM1_REGION``, at least
+    ``min_separation`` m apart and 0.3 m from the edge), each at a random time in
+    ``[0, placed_within]`` s (the truth holds it from then on). A camera
+    (``camera``) scans at ``frame_rate`` Hz and sees each object with
+    ``detection_probability``, noise ``noise`` (m, std). The first
+    ``wrong_first[0]``..``wrong_first[1]`` detections of each object carry a wrong
+    class (``TABLETOP_CONFUSIONS``); later ones are wrong with probability
+    ``wrong_later_rate``, a can's report is its superclass ``Can`` with probability
+    ``superclass_rate``, else the true class. Clutter: Poisson, ``clutter_rate``
+    per second, uniform over the table and the classes. Knowledge:
+    ``knowledge/sim1.yaml``.
+    """
+    low, high = n_objects
+    n = int(rng.integers(low, high + 1))
+    classes = ["CokeCan", "BeerCan"] + [
+        TABLETOP_CLASSES[int(i)] for i in rng.integers(len(TABLETOP_CLASSES), size=n - 2)
+    ]
+    places = _separated_points(rng, SIM1_REGION, n, min_separation, 0.3)
+    times = _frame_times(frame_rate, duration)
+    placed = rng.uniform(0.0, placed_within, n)
+    n_wrong = rng.integers(wrong_first[0], wrong_first[1] + 1, n)
+    objects = [
+        TruthObject(f"{cls.lower()}{i + 1}", cls, _pos(places[i]), (0.0, 0.0))
+        for i, cls in enumerate(classes)
+    ]
+    seen = [0] * n
+    truth: list[TruthFrame] = []
+    detections: list[Detection] = []
+    wrong: list[dict[str, object]] = []
+    report_classes = (*TABLETOP_CLASSES, "Can")
+    for t in times:
+        t = float(t)
+        present = [i for i in range(n) if placed[i] <= t]
+        truth.append(TruthFrame(t, tuple(objects[i] for i in present)))
+        for i in present:
+            if rng.random() >= detection_probability:
+                continue
+            cls = classes[i]
+            label = cls
+            if seen[i] < n_wrong[i] or rng.random() < wrong_later_rate:
+                options = TABLETOP_CONFUSIONS[cls]
+                label = options[int(rng.integers(len(options)))]
+                wrong.append({"time": t, "object": objects[i].id, "class": label})
+            elif cls in TABLETOP_SUPERCLASS and rng.random() < superclass_rate:
+                label = TABLETOP_SUPERCLASS[cls]
+            seen[i] += 1
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=label,
+                    position=_pos(places[i] + rng.normal(0.0, noise, 2)),
+                    source="camera",
+                    detector="camera",
+                )
+            )
+        for position in _uniform(rng, SIM1_REGION, rng.poisson(clutter_rate / frame_rate)):
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=report_classes[int(rng.integers(len(report_classes)))],
+                    position=_pos(position),
+                    source="camera",
+                    detector="camera",
+                )
+            )
+    return Scenario(
+        name="tabletop_wrong_labels",
+        truth=truth,
+        detections=detections,
+        knowledge_file="sim1.yaml",
+        duration=float(times[-1]),
+        region=SIM1_REGION,
+        seed=seed,
+        metadata={
+            "gospa_c": 0.5,
+            "wrong_labels": wrong,
+            "wrong_first": [int(k) for k in n_wrong],
+            "placed": [round(float(p), 3) for p in placed],
+        },
+    )
+
+
+def _walk(
+    waypoints: Sequence[tuple[float, float]], speed: float, start: float, times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """A smooth walk through ``waypoints`` at ``speed`` (m/s) starting at ``start`` (s).
+
+    Returns the positions and velocities at ``times``, shape ``(len(times), 2)`` (the
+    walker stands still at the first waypoint before ``start`` and at the last once
+    there), and the time it arrives.
+    """
+    position, velocity, walk = _arc_length_path(waypoints, speed)
+    since = np.clip(times - start, 0.0, walk)
+    moving = ((times >= start) & (times <= start + walk))[:, None]
+    return position(since), np.where(moving, velocity(since), 0.0), start + walk
+
+
+def _inside(position: np.ndarray, region: Region) -> bool:
+    return all(lo <= float(v) <= hi for v, (lo, hi) in zip(position, region, strict=True))
+
+
+def _person_detection(
+    rng: np.random.Generator, t: float, position: np.ndarray, noise: float
+) -> Detection:
+    return Detection(
+        time=t,
+        cls="Person",
+        position=_pos(position + rng.normal(0.0, noise, 2)),
+        source="camera",
+        detector="person_detector",
+    )
+
+
+def _room_clutter(rng: np.random.Generator, t: float, expected: float) -> list[Detection]:
+    return [
+        Detection(
+            time=t, cls="Person", position=_pos(xy), source="camera", detector="person_detector"
+        )
+        for xy in _uniform(rng, SIM2_REGION, rng.poisson(expected))
+    ]
+
+
+def corner_occlusion(
+    rng: np.random.Generator,
+    *,
+    rate: float = 10.0,
+    speed: tuple[float, float] = (0.8, 1.3),
+    detection_probability: float = 0.9,
+    clutter_rate: float = 0.5,
+    noise: float = 0.15,
+    occlusion: tuple[float, float] = (2.0, 4.0),
+    enter_time: float = 1.0,
+    linger: float = 5.0,
+    seed: int | None = None,
+) -> Scenario:
+    """A person turns two corners of the room and is hidden for 2-4 s at each.
+
+    Tests issue 9 item 6 ("lost after an occlusion at a corner: the prediction runs
+    outside the room, the object is dropped ... found again only 13 s later").
+
+    In sim2's room (``SIM2_REGION``, door at ``SIM2_DOOR``, knowledge
+    ``knowledge/sim2.yaml``) a person enters through the door at ``enter_time``,
+    walks down the left wall, turns the lower-left corner, walks along the bottom
+    wall, turns the lower-right corner and walks up to a random point where they
+    stay for ``linger`` s until the end. Wall distances (0.7-1.2 m), corner places
+    and the walking speed (``speed``, m/s) are random. At each corner the person is
+    hidden (truth ``visible=False``, no detection) for a duration drawn from
+    ``occlusion`` (s), starting 0.3-1.0 s before the corner: a constant-velocity
+    prediction leaves the room within about a second. Otherwise the person
+    detector (10 Hz) sees them with ``detection_probability`` and noise ``noise``;
+    clutter Poisson ``clutter_rate`` per second over the room.
+    ``metadata["occlusions"]`` lists the hidden intervals, ``metadata["corners"]``
+    the corner points.
+    """
+    left = rng.uniform(0.7, 1.2)
+    bottom = rng.uniform(0.7, 1.2)
+    right = rng.uniform(6.5, 9.0)
+    end_y = rng.uniform(3.5, 6.0)
+    walker_speed = rng.uniform(*speed)
+    door_x, door_y = SIM2_DOOR[0], 7.9
+    waypoints = (
+        (door_x, door_y),
+        (left, 6.6),
+        (left, 4.0),
+        (left, 2.0),
+        (left, bottom),
+        (2.5, bottom),
+        (right - 1.5, bottom),
+        (right, bottom),
+        (right, 2.0),
+        (right, end_y),
+    )
+    _, _, arrive = _walk(waypoints, walker_speed, enter_time, np.zeros(1))
+    times = _frame_times(rate, arrive + linger)
+    positions, velocities, _ = _walk(waypoints, walker_speed, enter_time, times)
+    fine = np.arange(enter_time, arrive, 0.01)
+    along, _, _ = _walk(waypoints, walker_speed, enter_time, fine)
+    corners = [(left, bottom), (right, bottom)]
+    occlusions: list[tuple[float, float]] = []
+    for corner in corners:
+        distances = np.linalg.norm(along - np.asarray(corner), axis=1)
+        t_corner = float(fine[int(np.argmin(distances))])
+        start = t_corner - rng.uniform(0.3, 1.0)
+        occlusions.append((round(start, 3), round(start + rng.uniform(*occlusion), 3)))
+    truth: list[TruthFrame] = []
+    detections: list[Detection] = []
+    for t, p, v in zip(times, positions, velocities, strict=True):
+        t = float(t)
+        objects: tuple[TruthObject, ...] = ()
+        if t >= enter_time:
+            visible = not any(a <= t < b for a, b in occlusions)
+            objects = (TruthObject("person", "Person", _pos(p), _pos(v), visible=visible),)
+            if visible and rng.random() < detection_probability:
+                detections.append(_person_detection(rng, t, p, noise))
+        truth.append(TruthFrame(t, objects))
+        detections.extend(_room_clutter(rng, t, clutter_rate / rate))
+    return Scenario(
+        name="corner_occlusion",
+        truth=truth,
+        detections=detections,
+        knowledge_file="sim2.yaml",
+        duration=float(times[-1]),
+        region=SIM2_REGION,
+        seed=seed,
+        metadata={
+            "gospa_c": 2.0,
+            "door": SIM2_DOOR,
+            "occlusions": [list(o) for o in occlusions],
+            "corners": [[round(x, 3), round(y, 3)] for x, y in corners],
+            "speed": round(float(walker_speed), 3),
+        },
+    )
+
+
+def door_exits(
+    rng: np.random.Generator,
+    *,
+    n_people: tuple[int, int] = (3, 5),
+    duration: float = 60.0,
+    rate: float = 10.0,
+    speed: tuple[float, float] = (0.7, 1.3),
+    detection_probability: float = 0.9,
+    clutter_rate: float = 0.5,
+    noise: float = 0.15,
+    seed: int | None = None,
+) -> Scenario:
+    """People enter and leave the room through its door, several over the run.
+
+    Tests issue 9 item 5 ("a person who walks out through the door is published
+    1.8 m outside a 4 m room") and the issue's "leaving and appearing": the world
+    must not show anyone outside the room once they left.
+
+    Between ``n_people[0]`` and ``n_people[1]`` people (``person1``...) each come in
+    from outside (0.5, 8.6), through the doorway (0.5, 7.9) next to sim2's Door,
+    walk to 1-3 random points of the room at a random ``speed`` (m/s), walk back
+    and leave the same way. Entry times are drawn over the first half of the run,
+    so walks overlap. The truth holds a person only while inside the room
+    (``SIM2_REGION``); the person detector (10 Hz, inside the room only) sees them
+    with ``detection_probability`` and noise ``noise``; clutter Poisson
+    ``clutter_rate`` per second over the room. Knowledge ``knowledge/sim2.yaml``.
+    ``metadata["visits"]`` gives each person's entry and exit times (the exit
+    may be after the end of the run).
+    """
+    n = int(rng.integers(n_people[0], n_people[1] + 1))
+    outside = (SIM2_DOOR[0], 8.6)
+    doorway = (SIM2_DOOR[0], 7.9)
+    hall = (1.2, 6.8)
+    times = _frame_times(rate, duration)
+    walkers: list[tuple[np.ndarray, np.ndarray, float, float]] = []
+    entries = np.sort(rng.uniform(1.0, max(1.0, 0.5 * duration), n))
+    for entry in entries:
+        stops = _uniform(rng, ((1.5, 9.0), (1.0, 6.5)), int(rng.integers(1, 4)))
+        waypoints = (
+            outside,
+            doorway,
+            hall,
+            *((float(x), float(y)) for x, y in stops),
+            hall,
+            doorway,
+            outside,
+        )
+        positions, velocities, arrive = _walk(
+            waypoints, float(rng.uniform(*speed)), float(entry), times
+        )
+        walkers.append((positions, velocities, float(entry), arrive))
+    truth: list[TruthFrame] = []
+    detections: list[Detection] = []
+    visits: list[list[float | None]] = [[None, None] for _ in range(n)]
+    for k, t in enumerate(times):
+        t = float(t)
+        objects = []
+        for i, (positions, velocities, entry, arrive) in enumerate(walkers):
+            if not entry <= t <= arrive:
+                continue
+            p, v = positions[k], velocities[k]
+            if not _inside(p, SIM2_REGION):
+                continue
+            visits[i][0] = t if visits[i][0] is None else visits[i][0]
+            visits[i][1] = t
+            objects.append(TruthObject(f"person{i + 1}", "Person", _pos(p), _pos(v)))
+            if rng.random() < detection_probability:
+                detections.append(_person_detection(rng, t, p, noise))
+        truth.append(TruthFrame(t, tuple(objects)))
+        detections.extend(_room_clutter(rng, t, clutter_rate / rate))
+    return Scenario(
+        name="door_exits",
+        truth=truth,
+        detections=detections,
+        knowledge_file="sim2.yaml",
+        duration=float(times[-1]),
+        region=SIM2_REGION,
+        seed=seed,
+        metadata={
+            "gospa_c": 2.0,
+            "door": SIM2_DOOR,
+            "visits": visits,
+            "walk_ends": [round(a, 3) for _, _, _, a in walkers],
+        },
+    )
+
+
+DATASHEET_REGION: Region = ((0.0, 12.0), (0.0, 8.0))
+"""The field of view of :func:`datasheet`'s sensor (m)."""
+
+
+def _border_point(rng: np.random.Generator, region: Region, side: int) -> np.ndarray:
+    (x0, x1), (y0, y1) = region
+    u = rng.random()
+    corners = {
+        0: (x0 + u * (x1 - x0), y0),
+        1: (x1, y0 + u * (y1 - y0)),
+        2: (x0 + u * (x1 - x0), y1),
+        3: (x0, y0 + u * (y1 - y0)),
+    }
+    return np.asarray(corners[side])
+
+
+def datasheet(
+    rng: np.random.Generator,
+    *,
+    duration: float = 60.0,
+    rate: float = 10.0,
+    recall: float = 0.9,
+    false_positives_per_frame: float = 0.2,
+    noise: float = 0.1,
+    person_rate: float = 0.1,
+    n_boxes: tuple[int, int] = (2, 4),
+    speed: tuple[float, float] = (0.8, 1.5),
+    seed: int | None = None,
+) -> Scenario:
+    """People crossing and boxes put down and picked up in one sensor's field of view.
+
+    Tests issue 9 items 1 and 3 (a knowledge file a user writes from documented
+    rates keeps the world empty; the birth/pruning cliff): the sensor is the one
+    ``benchmarks/knowledge/datasheet.yaml`` describes from its datasheet only.
+
+    An overhead detector (``overhead``, ``source="overhead"``) with a 12 x 8 m field
+    of view (``DATASHEET_REGION``) runs at ``rate`` Hz with ``recall`` (probability
+    of detecting an object in view per frame), ``false_positives_per_frame``
+    (Poisson, uniform over the view, class Person or Box) and position noise
+    ``noise`` (m, std). People arrive as a Poisson process (``person_rate`` Hz),
+    each entering the view at a random point of its border and walking straight
+    to a random point of another side at ``speed`` m/s; the truth holds them while
+    in view. Between ``n_boxes[0]`` and ``n_boxes[1]`` boxes are put down at random
+    places at a random time in the first half of the run and picked up 10-30 s
+    later (possibly after the end).
+    """
+    times = _frame_times(rate, duration)
+    people: list[tuple[float, np.ndarray, np.ndarray]] = []  # start time, start, velocity
+    t_next = float(rng.exponential(1.0 / person_rate))
+    while t_next < duration:
+        side = int(rng.integers(4))
+        other = (side + int(rng.integers(1, 4))) % 4
+        start = _border_point(rng, DATASHEET_REGION, side)
+        goal = _border_point(rng, DATASHEET_REGION, other)
+        direction = (goal - start) / max(float(np.linalg.norm(goal - start)), 1e-9)
+        people.append((t_next, start, direction * rng.uniform(*speed)))
+        t_next += float(rng.exponential(1.0 / person_rate))
+    n = int(rng.integers(n_boxes[0], n_boxes[1] + 1))
+    box_places = _separated_points(rng, DATASHEET_REGION, n, 1.0, 0.5)
+    box_down = rng.uniform(0.0, 0.5 * duration, n)
+    box_up = box_down + rng.uniform(10.0, 30.0, n)
+    truth: list[TruthFrame] = []
+    detections: list[Detection] = []
+
+    def seen(t: float, cls: str, position: np.ndarray) -> None:
+        if rng.random() < recall:
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=cls,
+                    position=_pos(position + rng.normal(0.0, noise, 2)),
+                    source="overhead",
+                    detector="overhead",
+                )
+            )
+
+    for t in times:
+        t = float(t)
+        objects: list[TruthObject] = []
+        for i, (start_time, start, velocity) in enumerate(people):
+            p = start + velocity * (t - start_time)
+            if t < start_time or not _inside(p, DATASHEET_REGION):
+                continue
+            objects.append(TruthObject(f"person{i + 1}", "Person", _pos(p), _pos(velocity)))
+            seen(t, "Person", p)
+        for i in range(n):
+            if box_down[i] <= t < box_up[i]:
+                objects.append(TruthObject(f"box{i + 1}", "Box", _pos(box_places[i]), (0.0, 0.0)))
+                seen(t, "Box", box_places[i])
+        truth.append(TruthFrame(t, tuple(objects)))
+        for xy in _uniform(rng, DATASHEET_REGION, rng.poisson(false_positives_per_frame)):
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=("Person", "Box")[int(rng.integers(2))],
+                    position=_pos(xy),
+                    source="overhead",
+                    detector="overhead",
+                )
+            )
+    return Scenario(
+        name="datasheet",
+        truth=truth,
+        detections=detections,
+        knowledge_file="datasheet.yaml",
+        duration=float(times[-1]),
+        region=DATASHEET_REGION,
+        seed=seed,
+        metadata={
+            "gospa_c": 1.0,
+            "knowledge_dir": "benchmarks/knowledge",
+            "people": [round(s, 3) for s, _, _ in people],
+            "boxes": [
+                [round(float(a), 3), round(float(b), 3)]
+                for a, b in zip(box_down, box_up, strict=True)
+            ],
+        },
+    )
+
+
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "sim1": sim1,
     "sim2": sim2,
     "robocup": robocup,
     "grid": grid,
+    "tabletop_wrong_labels": tabletop_wrong_labels,
+    "corner_occlusion": corner_occlusion,
+    "door_exits": door_exits,
+    "datasheet": datasheet,
 }
 """Generators by name, as ``semwm simulate NAME`` knows them."""
 
