@@ -34,6 +34,8 @@ from semwm.world_types import HypothesisObject, HypothesisSummary, WorldObject, 
 
 ScanKey = tuple[float, str]
 _HANDOVER_GATE = 13.8  # chi-square 99.9 % for 2 degrees of freedom; ids move only this close
+_SAME_OBJECT_GATE = 1.0  # squared Mahalanobis distance: two lineages' estimates coincide
+_GROUPING_FLOOR = 1e-3  # lineages less likely than this are not grouped
 
 
 @dataclass(frozen=True)
@@ -71,6 +73,7 @@ class _Published:
     has to be handed over)."""
 
     track: Track
+    lost_at: float | None = None  # when it left the published world
 
     @property
     def lineage(self) -> int:
@@ -278,14 +281,23 @@ class WorldModel:
         dim = self._knowledge.world.dimension
         current = self._current()
         alive = {t.lineage for t in state.tracks.values()}
+        now = state.time if state.time is not None else 0.0
+        memory = self._knowledge.world.id_memory
         for object_id, pub in list(self._published.items()):
             if pub.lineage not in current:
-                self._lost[object_id] = pub
-        self._lost = {
-            i: p
-            for i, p in self._lost.items()
-            if p.lineage in alive and self._ids.get(p.lineage) == i
-        }
+                self._lost[object_id] = replace(pub, lost_at=now)
+        if self._mhf.mht:  # ids wait id_memory seconds for their object to come back
+            self._lost = {
+                i: p
+                for i, p in self._lost.items()
+                if p.lost_at is not None and now - p.lost_at <= memory and self._may_return(p)
+            }
+        else:  # paper: an id waits while its lineage lives (the MAP may switch back)
+            self._lost = {
+                i: p
+                for i, p in self._lost.items()
+                if p.lineage in alive and self._ids.get(p.lineage) == i
+            }
         for lineage in current:
             held = self._ids.get(lineage)
             if held is not None:
@@ -302,15 +314,44 @@ class WorldModel:
             self._ids[lineage]: _Published(track) for lineage, track in current.items()
         }
 
+    def _may_return(self, pub: _Published) -> bool:
+        """Whether a lost object may come back under its id (``mht``): not when it was
+        lost out of the region or next to a target it leaves by (a disappearance
+        relation: it left, and someone coming in there is someone else)."""
+        spec = self._knowledge.classes.get(pub.track.cls)
+        if spec is None:
+            return False
+        x, P = _summary_position(pub.track, self._knowledge.world.dimension)
+        region = self._knowledge.world.region
+        if inside_probability(x[None], P[None], region)[0] < 0.5:
+            return False
+        for relation in spec.disappearance:
+            covered = self.taxonomy.covers(relation.target)
+            for known in self._knowledge.known_objects:
+                near = float(np.linalg.norm(x - np.asarray(known.position)))
+                if known.cls in covered and near <= relation.max_distance:
+                    return False
+        return True
+
     def _hand_over(self, fresh: list[Track], dim: int) -> None:
+        """Lost ids go to fresh objects within the hand-over gate of the lost objects'
+        predictions to now (lowest total Mahalanobis distance, Hungarian)."""
         lost = list(self._lost.items())
+        now = self._state.time if self._state.time is not None else 0.0
+        predicted = self._mhf.predict(
+            MHFState((), {i: pub.track for i, (_, pub) in enumerate(lost)}, None, 0, {}),
+            list(range(len(lost))),
+            now,
+        )
         cost = np.full((len(fresh), len(lost)), 1e9)
         for a, track in enumerate(fresh):
             x, P = _summary_position(track, dim)
             for b, (_, pub) in enumerate(lost):
                 if not self.taxonomy.compatible(track.cls, pub.track.cls):
                     continue
-                x_lost, P_lost = _summary_position(pub.track, dim)
+                x_lost, P_lost = predicted.position[b], predicted.position_covariance[b]
+                if not np.all(np.isfinite(P_lost)):
+                    continue
                 delta = x - x_lost
                 d2 = float(delta @ np.linalg.solve(P + P_lost, delta))
                 if d2 <= _HANDOVER_GATE:
@@ -356,8 +397,84 @@ class WorldModel:
                     value = p * state.existence.get(key, 1.0) * inside[key]
                     totals[track.lineage] = totals.get(track.lineage, 0.0) + value
                     chosen.setdefault(track.lineage, track)
+        lineages = list(totals)
+        position, covariance = _stored_positions(
+            [chosen[lineage] for lineage in lineages], self._knowledge.world.dimension
+        )
+        merged = self._same_objects(
+            {
+                lineage: _Marginal(totals[lineage], chosen[lineage], row)
+                for row, lineage in enumerate(lineages)
+            },
+            position,
+            covariance,
+        )
         floor = self._knowledge.world.min_existence
-        return {lineage: chosen[lineage] for lineage, e in totals.items() if e >= floor}
+        return {lineage: m.track for lineage, m in merged.items() if m.existence >= floor}
+
+    def _same_objects(
+        self,
+        marginals: dict[int, _Marginal],
+        position: FloatArray,
+        covariance: FloatArray,
+    ) -> dict[int, _Marginal]:
+        """One entry per physical object: lineages that are the same object in different
+        hypotheses (their estimates nearly coincide, their classes are compatible, and
+        the most probable hypothesis does not hold both) are one object, whose existence
+        is the sum of theirs (at most 1), shown as the lineage published now (stable
+        ids), else the most likely one.
+
+        Hypotheses that agree an object exists but not on which detection started it
+        hold it under different lineages; without this, a 50/50 disagreement about
+        identity would read as two objects of existence 0.5 each.
+        """
+        candidates = [lineage for lineage, m in marginals.items() if m.existence >= _GROUPING_FLOOR]
+        if len(candidates) < 2:
+            return marginals
+        state = self._state
+        together = {state.tracks[k].lineage for k in state.best.tracks}
+        parent = {lineage: lineage for lineage in candidates}
+
+        def root(lineage: int) -> int:
+            while parent[lineage] != lineage:
+                parent[lineage] = parent[parent[lineage]]
+                lineage = parent[lineage]
+            return lineage
+
+        rows = np.array([marginals[lineage].row for lineage in candidates])
+        x, P = position[rows], covariance[rows]
+        delta = x[:, None, :] - x[None, :, :]
+        S = P[:, None] + P[None, :]
+        d2 = np.einsum("abi,abi->ab", delta, np.linalg.solve(S, delta[..., None])[..., 0])
+        for a, b in zip(*np.nonzero(np.triu(d2 <= _SAME_OBJECT_GATE, k=1)), strict=True):
+            first, second = candidates[int(a)], candidates[int(b)]
+            if first in together and second in together:
+                continue  # the most probable hypothesis holds both: two objects
+            if not self.taxonomy.compatible(
+                marginals[first].track.cls, marginals[second].track.cls
+            ):
+                continue
+            parent[root(first)] = root(second)
+        groups: dict[int, list[int]] = {}
+        for lineage in candidates:
+            groups.setdefault(root(lineage), []).append(lineage)
+        result = dict(marginals)
+        for members in groups.values():
+            if len(members) == 1:
+                continue
+            # shown as the member that already has an id (stable ids), else the likeliest
+            shown = {p.lineage for p in self._published.values()}
+            with_id = [m for m in members if m in shown]
+            best = (
+                min(with_id, key=lambda m: self._ids.get(m, 0))
+                if with_id
+                else max(members, key=lambda m: (marginals[m].existence, -m))
+            )
+            total = min(1.0, math.fsum(marginals[m].existence for m in members))
+            for member in members:
+                del result[member]
+            result[best] = replace(marginals[best], existence=total)
+        return result
 
     def _marginals(self, at: float) -> tuple[dict[int, _Marginal], Predicted]:
         """Every object's marginal existence at ``at`` and its most probable version."""
@@ -444,6 +561,10 @@ class WorldModel:
         if at is None or not math.isfinite(at):
             return WorldState(time=at, objects=())
         marginals, predicted = self._marginals(at)
+        if self._mhf.mht:
+            marginals = self._same_objects(
+                marginals, predicted.position, predicted.position_covariance
+            )
         if not self._mhf.mht:
             best = {state.tracks[k].lineage for k in state.best.tracks}
             marginals = {lineage: m for lineage, m in marginals.items() if lineage in best}

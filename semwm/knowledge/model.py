@@ -78,6 +78,11 @@ class WorldSettings(Frozen):
     label_error_rate
         Probability that a detection's label is wrong: the prior weight of a labelled
         detection being another object than the one holding the label.
+    id_memory
+        ``mht`` only: for this long (s) after an object leaves the world, an object
+        found again near its prediction (hand-over gate) takes its id back (an
+        occlusion the knowledge cannot foresee), unless it was lost out of the
+        region or next to a disappearance relation's target.
     gate_probability
         Mahalanobis gate: an object further than the chi-square quantile of this
         probability from a detection spawns no association. 1.0 disables gating.
@@ -99,6 +104,7 @@ class WorldSettings(Frozen):
     removal_existence: Annotated[float, Field(gt=0.0, lt=1.0)] = 1e-5
     label_gate: Positive = 2.0
     label_error_rate: Annotated[float, Field(gt=0.0, lt=1.0)] = 1e-3
+    id_memory: Annotated[float, Field(ge=0.0, le=3600.0)] = 5.0
     gate_probability: Annotated[float, Field(gt=0.0, le=1.0)] = 0.9999
     region: tuple[tuple[float, float], ...] | None = None
     default_detector: str | None = None

@@ -80,6 +80,7 @@ _WORLD_FIELDS = (
     "removal_existence",
     "label_gate",
     "label_error_rate",
+    "id_memory",
     "gate_probability",
     "region",
     "default_detector",

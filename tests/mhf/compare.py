@@ -35,6 +35,18 @@ def ref_hypotheses(ref: ReferenceMHF) -> list[Hyp]:
     ]
 
 
+def lineage_existence(ref: ReferenceMHF) -> dict[int, tuple[str, float]]:
+    """Lineage -> (class in the most probable hypothesis holding it, existence summed
+    over hypotheses, inside the region)."""
+    totals: dict[int, float] = {}
+    chosen: dict[int, str] = {}
+    for h in sorted(ref.hypotheses, key=lambda h: -h.p):
+        for o in h.objects:
+            totals[o.lineage] = totals.get(o.lineage, 0.0) + h.p * o.r * ref.inside(o)
+            chosen.setdefault(o.lineage, o.cls)
+    return {lin: (chosen[lin], total) for lin, total in totals.items()}
+
+
 def published(ref: ReferenceMHF, floor: float) -> list[tuple[int, str]]:
     """(lineage, class) of the objects whose existence over all hypotheses (sum of p times
     existence inside the region) is at least ``floor``, each in the version of the most
