@@ -13,9 +13,8 @@ from semwm.world import WorldModel
 
 from .compare import (
     assert_same_hypotheses,
-    map_objects,
     lineage_existence,
-    published,
+    map_objects,
     real_hypotheses,
     ref_hypotheses,
 )
