@@ -23,6 +23,7 @@ from semwm.detection import Detection, DetectionError, DetectionProblem, OutOfOr
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
 from semwm.persistence.records import Record, batch_record, knowledge_record, reset_record
 from semwm.sources import SourceRegistry, SourceStatus, TimeGuard, TimeGuardError
+from semwm.team import LocalModel
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 
 T = TypeVar("T")
@@ -98,6 +99,7 @@ class WorldService:
         self.sources = SourceRegistry(time_guard)
         self._sources_lock = threading.Lock()  # taken inside self._lock, never around it
         self.clock = clock
+        self._locals: dict[str, LocalModel] = {}  # two levels: robots' local models
 
     def use_model(self, model: WorldModel) -> None:
         """Serve ``model`` from now on (the one a data directory restored)."""
@@ -171,6 +173,43 @@ class WorldService:
     def _synced(self, name: str) -> bool:
         clock = self.sources.clock(name)
         return clock is not None and clock.synced
+
+    # -- two levels (paper 000) ----------------------------------------------------------------
+
+    def local_ingest(self, robot: str, detections: Sequence[dict[str, Any]], batch: bool) -> int:
+        """Apply ``detections`` to robot ``robot``'s local model (its own clock), then send
+        its report (objects updated since the last one) to the global model. Returns the
+        objects reported."""
+        with self._lock:
+            local = self._locals.get(robot)
+            if local is None:
+                local = LocalModel(robot, self._model.knowledge, detector=None)
+            try:
+                local.ingest(list(detections))
+            except DetectionError as error:
+                raise InvalidError(problems_to_items(error.problems, batch)) from error
+            except OutOfOrderError as error:
+                raise ConflictError(
+                    f"{error} (local model of {robot!r}); nothing was applied"
+                ) from error
+            self._locals[robot] = local
+            report = local.report()
+        if report is None:
+            return 0
+        self.ingest(list(report.detections), batch=True)
+        return len(report.detections)
+
+    def local_world(self, robot: str, time: float | None = None) -> WorldState:
+        with self._lock:
+            local = self._locals.get(robot)
+            if local is None:
+                raise NotFoundError(
+                    f"no local model for robot {robot!r}; robots: {known_list(list(self._locals))}"
+                )
+            try:
+                return local.world(time)
+            except ValueError as error:
+                raise InvalidError.one(("query", "time"), str(error)) from error
 
     # -- sources ------------------------------------------------------------------------------
 
@@ -265,6 +304,7 @@ class WorldService:
     def reset(self) -> float | None:
         with self._lock, self._change(reset_record()):
             self._model.reset()
+            self._locals = {}
             with self._sources_lock:
                 self.sources.forget_times()
             return self._model.latest_time

@@ -145,3 +145,20 @@ def test_real_server_refuses_1e15_and_accepts_later_real_detections(knowledge_fi
         assert world["time"] == 6.6 and len(world["objects"]) == 1
         (source,) = http.get("/sources").json()["sources"]
         assert source["refused"] == 1 and source["detections"] == 4
+
+
+def test_two_levels_local_model_reports_to_the_global_world(client: TestClient) -> None:
+    for step in range(4):
+        t = 0.5 * step
+        body = {"detections": [cup(t, "r1"), {"time": t, "class": "CokeCan",
+                                               "position": [3.0, 2.0], "source": "r1"}]}  # fmt: skip
+        response = client.post("/local/r1/detections", json=body)
+        assert response.status_code == 200, response.text
+        assert response.json() == {"applied": 2, "reported": 2}
+    local = client.get("/local/r1/world").json()
+    assert sorted(o["class"] for o in local["objects"]) == ["CokeCan", "Cup"]
+    world = client.get("/world").json()
+    assert sorted(o["class"] for o in world["objects"]) == ["CokeCan", "Cup"]
+    assert client.get("/local/nobody/world").status_code == 404
+    bad = client.post("/local/r1/detections", json={"time": 9.0, "class": "Cup", "position": [1]})
+    assert bad.status_code == 422
