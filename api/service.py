@@ -147,7 +147,10 @@ class WorldService:
             except TimeGuardError as error:
                 raise InvalidError(_time_items(error, batch)) from error
             try:
-                placed = [d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections]
+                placed = [
+                    d.to_dict() if isinstance(d, Detection) else dict(d)
+                    for d in placement.detections
+                ]
                 with self._change(batch_record(placed)):
                     result = self._model.ingest(placed)
             except DetectionError as error:

@@ -87,3 +87,15 @@ def test_team_run_two_levels_and_clock_sync_on_a_short_robocup() -> None:
     assert team.late == 0
     unsynced = run_team(scenario, knowledge, levels=1, network=Network(3.0, (0.02, 0.15), False))
     assert unsynced.late > 0  # sources whose clocks are behind arrive too late
+
+
+def test_simulate_levels_writes_the_team_metrics(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from semwm.cli import main
+
+    out = tmp_path / "run"
+    argv = ["simulate", "robocup", "--duration", "0.4", "--levels", "2", "--clock-offset", "3",
+            "--latency", "0.02,0.15", "--no-progress", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    team = json.loads((out / "metrics.json").read_text())["team"]
+    assert team["levels"] == 2 and team["between_levels"]["messages"] > 0
+    assert set(team["cpu_s"]) == {"local", "global"}
