@@ -18,10 +18,11 @@ from pydantic import BaseModel
 from api.deps import get_world
 from api.errors import install_error_handlers
 from api.persistence import attach_persistence
-from api.routes import detections, knowledge, persistence, system, world
+from api.routes import detections, knowledge, local, persistence, sources, system, world
 from api.schemas import DetectionBatch, DetectionIn
 from api.service import WorldService
 from api.settings import Settings
+from semwm.sources import TimeGuard
 
 logger = logging.getLogger("api")
 
@@ -52,6 +53,7 @@ def create_app(settings: Settings) -> FastAPI:
                 settings.knowledge,
                 reorder_window=settings.reorder_window,
                 write_back=settings.write_back,
+                time_guard=TimeGuard(settings.max_ahead, settings.max_jump),
             )
             logger.info("world model built from %s", settings.knowledge)
         with attach_persistence(app, settings):
@@ -60,7 +62,7 @@ def create_app(settings: Settings) -> FastAPI:
     app = FastAPI(title="semwm", version="0.1.0", description=DESCRIPTION, lifespan=lifespan)
     app.state.settings = settings
     install_error_handlers(app)
-    for module in (detections, world, knowledge, system, persistence):
+    for module in (detections, world, knowledge, system, persistence, sources, local):
         app.include_router(module.router)
 
     def openapi() -> dict[str, Any]:

@@ -10,6 +10,7 @@ detection acknowledged before it, none half-applied). Domain errors become
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager
 from pathlib import Path
@@ -17,9 +18,12 @@ from typing import Any, Protocol, TypeVar
 
 from api.errors import ConflictError, InvalidError, KnowledgeFileError, Loc, NotFoundError
 from semwm import IngestResult, WorldModel, load_knowledge
-from semwm.detection import DetectionError, DetectionProblem, OutOfOrderError
+from semwm.clock import Exchange
+from semwm.detection import Detection, DetectionError, DetectionProblem, OutOfOrderError
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
 from semwm.persistence.records import Record, batch_record, knowledge_record, reset_record
+from semwm.sources import SourceRegistry, SourceStatus, TimeGuard, TimeGuardError
+from semwm.team import LocalModel
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 
 T = TypeVar("T")
@@ -72,16 +76,30 @@ class WorldService:
         and write-back writes. ``None`` when the knowledge was built in code.
     write_back
         Write accepted class edits to ``knowledge_path``.
+    time_guard
+        Bounds on detection times (:class:`semwm.sources.TimeGuard`).
+    clock
+        The service clock (s); detections of synced sources are placed on it.
     """
 
     def __init__(
-        self, model: WorldModel, knowledge_path: Path | None = None, write_back: bool = False
+        self,
+        model: WorldModel,
+        knowledge_path: Path | None = None,
+        write_back: bool = False,
+        *,
+        time_guard: TimeGuard | None = None,
+        clock: Callable[[], float] = time.time,
     ) -> None:
         self._model = model
         self._lock = threading.Lock()
         self.knowledge_path = knowledge_path
         self.write_back = write_back
         self.hooks: list[ChangeHook] = []
+        self.sources = SourceRegistry(time_guard)
+        self._sources_lock = threading.Lock()  # taken inside self._lock, never around it
+        self.clock = clock
+        self._locals: dict[str, LocalModel] = {}  # two levels: robots' local models
 
     def use_model(self, model: WorldModel) -> None:
         """Serve ``model`` from now on (the one a data directory restored)."""
@@ -103,11 +121,18 @@ class WorldService:
 
     @classmethod
     def from_file(
-        cls, path: Path, reorder_window: float = 0.5, write_back: bool = False
+        cls,
+        path: Path,
+        reorder_window: float = 0.5,
+        write_back: bool = False,
+        time_guard: TimeGuard | None = None,
     ) -> WorldService:
         """Load ``path`` and build the world model (raises :class:`KnowledgeError`)."""
         return cls(
-            WorldModel(load_knowledge(path), reorder_window=reorder_window), path, write_back
+            WorldModel(load_knowledge(path), reorder_window=reorder_window),
+            path,
+            write_back,
+            time_guard=time_guard,
         )
 
     # -- detections ---------------------------------------------------------------------------
@@ -115,14 +140,90 @@ class WorldService:
     def ingest(self, detections: Sequence[dict[str, Any]], batch: bool) -> IngestResult:
         """Apply ``detections`` whole, or raise :class:`InvalidError`/:class:`ConflictError`."""
         with self._lock:
+            now = self.clock()
             try:
-                with self._change(batch_record(detections)):
-                    result = self._model.ingest(list(detections))
+                with self._sources_lock:
+                    placement = self.sources.place(list(detections), now)
+            except TimeGuardError as error:
+                raise InvalidError(_time_items(error, batch)) from error
+            try:
+                placed = [
+                    d.to_dict() if isinstance(d, Detection) else dict(d)
+                    for d in placement.detections
+                ]
+                with self._change(batch_record(placed)):
+                    result = self._model.ingest(placed)
             except DetectionError as error:
                 raise InvalidError(problems_to_items(error.problems, batch)) from error
             except OutOfOrderError as error:
-                raise ConflictError(f"{error}; nothing was applied") from error
+                message = f"{error}; nothing was applied"
+                with self._sources_lock:
+                    self.sources.late(placement, message)
+                unsynced = sorted(
+                    str(s) for s in placement.counts if s is not None and not self._synced(s)
+                )
+                hint = (
+                    f" (unsynced source(s) {', '.join(unsynced)}: sync their clocks with "
+                    "POST /sources/NAME/sync, see GET /sources)"
+                    if unsynced
+                    else ""
+                )
+                raise ConflictError(message + hint) from error
+            with self._sources_lock:
+                self.sources.accepted(placement, now)
             return result
+
+    def _synced(self, name: str) -> bool:
+        clock = self.sources.clock(name)
+        return clock is not None and clock.synced
+
+    # -- two levels (paper 000) ----------------------------------------------------------------
+
+    def local_ingest(self, robot: str, detections: Sequence[dict[str, Any]], batch: bool) -> int:
+        """Apply ``detections`` to robot ``robot``'s local model (its own clock), then send
+        its report (objects updated since the last one) to the global model. Returns the
+        objects reported."""
+        with self._lock:
+            local = self._locals.get(robot)
+            if local is None:
+                local = LocalModel(robot, self._model.knowledge, detector=None)
+            try:
+                local.ingest(list(detections))
+            except DetectionError as error:
+                raise InvalidError(problems_to_items(error.problems, batch)) from error
+            except OutOfOrderError as error:
+                raise ConflictError(
+                    f"{error} (local model of {robot!r}); nothing was applied"
+                ) from error
+            self._locals[robot] = local
+            report = local.report()
+        if report is None:
+            return 0
+        self.ingest(list(report.detections), batch=True)
+        return len(report.detections)
+
+    def local_world(self, robot: str, time: float | None = None) -> WorldState:
+        with self._lock:
+            local = self._locals.get(robot)
+            if local is None:
+                raise NotFoundError(
+                    f"no local model for robot {robot!r}; robots: {known_list(list(self._locals))}"
+                )
+            try:
+                return local.world(time)
+            except ValueError as error:
+                raise InvalidError.one(("query", "time"), str(error)) from error
+
+    # -- sources ------------------------------------------------------------------------------
+
+    def sync(self, name: str, exchange: Exchange) -> SourceStatus:
+        """Add a finished sync exchange of source ``name`` (422 naming a bad time)."""
+        with self._sources_lock:
+            return self.sources.sync(name, exchange)
+
+    def source_statuses(self) -> list[SourceStatus]:
+        with self._sources_lock:
+            return self.sources.statuses()
 
     def domain_problems(
         self, detections: Sequence[dict[str, Any]], index: Sequence[int], batch: bool
@@ -206,6 +307,9 @@ class WorldService:
     def reset(self) -> float | None:
         with self._lock, self._change(reset_record()):
             self._model.reset()
+            self._locals = {}
+            with self._sources_lock:
+                self.sources.forget_times()
             return self._model.latest_time
 
     def digest(self, also: Callable[[], T] | None = None) -> tuple[str, T | None]:
@@ -305,6 +409,14 @@ class WorldService:
                     f"the reloaded knowledge conflicts with the tracked objects: {error}"
                 ) from None
         return knowledge
+
+
+def _time_items(error: TimeGuardError, batch: bool) -> list[dict[str, Any]]:
+    """Time-guard refusals as 422 items at each detection's ``time``."""
+    return [
+        {"loc": list(detection_loc((p.index, "time"), batch)), "msg": p.message, "type": p.kind}
+        for p in error.problems
+    ]
 
 
 def _knowledge_item(path: Sequence[str | int], message: str, index: int) -> dict[str, Any]:

@@ -27,6 +27,10 @@ class Settings(BaseSettings):
         still accepted (re-ordered); older ones are refused with 409.
     max_batch
         The largest batch ``POST /detections`` accepts.
+    max_ahead, max_jump
+        Time guards (s): a detection may be at most ``max_ahead`` ahead of the service
+        clock, and a source's time may advance at most ``max_jump`` more than the
+        service clock did since its previous detection; else 422 (see ``GET /sources``).
     write_back
         Write accepted ``PUT /knowledge/classes/{name}`` edits back to the knowledge
         file (atomically).
@@ -53,3 +57,5 @@ class Settings(BaseSettings):
     snapshot_every: Annotated[int, Field(ge=1)] = 1000
     compact_every: Annotated[int, Field(ge=1)] = 100_000
     record: Path | None = None
+    max_ahead: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 10.0
+    max_jump: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 60.0

@@ -34,6 +34,7 @@ from semwm.cli.common import (
     description,
     positive_float,
 )
+from semwm.cli.simulate_team import add_team_options, simulate_team
 from semwm.knowledge.loader import UnknownFormatError, load_document
 from semwm.knowledge.model import KnowledgeDocument
 from semwm.knowledge.problems import KnowledgeError
@@ -121,8 +122,11 @@ def simulate(args: argparse.Namespace) -> int:
     out = args.out or default_out(args.name, args.seed, ablations, args.knowledge)
     if out.exists() and not out.is_dir():
         raise CommandError(f"--out {out}: exists and is not a folder")
-    result = run_scenario(scenario, knowledge, progress=not args.no_progress)
-    write_run(result, out, ablations=ablations)
+    if args.levels is not None:  # the team run (semwm/cli/simulate_team.py)
+        result = simulate_team(args, scenario, knowledge, out, ablations)
+    else:
+        result = run_scenario(scenario, knowledge, progress=not args.no_progress)
+        write_run(result, out, ablations=ablations)
     ablated = f" without {', '.join(ablations)}" if ablations else ""
     print(f"{args.name} (seed {args.seed}){ablated}, knowledge {path}: wrote {out}")
     print(format_summary(result.metrics, result.n_detections))
@@ -174,5 +178,6 @@ def add_simulate_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="scenario duration in s (sim1, robocup)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_team_options(parser)
     parser.set_defaults(func=simulate)
     return parser

@@ -1,0 +1,118 @@
+"""``POST /sources/{name}/sync`` (paper 003 clock exchange) and ``GET /sources``."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, Path
+from pydantic import BaseModel, ConfigDict, Field
+
+from api.deps import WorldDep
+from api.errors import InvalidError
+from api.schemas import ValidationErrorOut
+from semwm.clock import Exchange, ExchangeError
+from semwm.sources import SourceStatus
+
+router = APIRouter(tags=["sources"])
+
+_EXAMPLES: dict[str, Any] = {
+    "request": {"summary": "1. The source's request (t1, its clock)", "value": {"sent": 5.1}},
+    "finished": {
+        "summary": "2. The finished exchange (t4 when the answer came back)",
+        "value": {"sent": 5.1, "received": 1763880000.02, "replied": 1763880000.021,
+                  "returned": 5.14},
+    },
+}  # fmt: skip
+
+Seconds = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+_TIMES = ("received", "replied", "returned")
+
+
+class SyncIn(BaseModel):
+    """A sync request (``sent`` only) or a finished exchange (all four times)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    sent: Seconds = Field(description="t1: when the source sent the request, by its clock (s)")
+    received: Seconds | None = Field(None, description="t2: from the service's answer (s)")
+    replied: Seconds | None = Field(None, description="t3: from the service's answer (s)")
+    returned: Seconds | None = Field(
+        None, description="t4: when the answer reached the source, by its clock (s)"
+    )
+
+
+class SyncReplyOut(BaseModel):
+    """The service's half of an exchange (service clock, s)."""
+
+    sent: float
+    received: float
+    replied: float
+
+
+class SourceOut(BaseModel):
+    """One source: its clock offset (service clock = source clock + offset) and counts."""
+
+    name: str | None
+    synced: bool
+    clock_offset: float | None = Field(description="service clock minus source clock (s)")
+    offset_std: float | None = Field(description="standard uncertainty of the offset (s)")
+    delay: float | None = Field(description="smallest round-trip delay kept (s)")
+    exchanges: int
+    detections: int
+    last_time: float | None = Field(description="latest accepted time, service clock (s)")
+    late: int = Field(description="detections refused as older than the reorder window")
+    refused: int = Field(description="detections refused by a time guard")
+    problem: str | None = Field(description="why its last detections were refused, if they were")
+
+    @classmethod
+    def of(cls, status: SourceStatus) -> SourceOut:
+        return cls.model_validate(status.to_dict())
+
+
+class SourcesOut(BaseModel):
+    sources: list[SourceOut]
+
+
+@router.post(
+    "/sources/{name}/sync",
+    response_model=SyncReplyOut | SourceOut,
+    summary="Clock sync exchange (paper 003, NTP-style)",
+    responses={422: {"model": ValidationErrorOut, "description": "Not one round trip"}},
+)
+async def sync(
+    world: WorldDep,
+    name: Annotated[str, Path(min_length=1, max_length=200)],
+    body: Annotated[SyncIn, Body(openapi_examples=_EXAMPLES)],
+) -> SyncReplyOut | SourceOut:
+    """Two calls make one exchange.
+
+    1. ``{"sent": t1}`` (source clock) answers ``{"sent": t1, "received": t2,
+       "replied": t3}`` (service clock).
+    2. ``{"sent", "received", "replied", "returned": t4}`` updates the source's offset
+       (``((t2 - t1) + (t3 - t4)) / 2``, smoothed over the smallest-delay exchanges)
+       and answers the source as ``GET /sources`` shows it.
+    """
+    received = world.clock()
+    given = [t for t in _TIMES if getattr(body, t) is not None]
+    if not given:
+        return SyncReplyOut(sent=body.sent, received=received, replied=world.clock())
+    if len(given) < len(_TIMES):
+        missing = [t for t in _TIMES if t not in given]
+        raise InvalidError.one(
+            ("body", missing[0]),
+            f"a finished exchange needs sent, received, replied and returned; "
+            f"missing {', '.join(missing)}",
+            "missing",
+        )
+    try:
+        exchange = Exchange(body.sent, body.received, body.replied, body.returned)  # type: ignore[arg-type]
+    except ExchangeError as error:
+        raise InvalidError.one(("body", error.field), str(error)) from error
+    return SourceOut.of(world.sync(name, exchange))
+
+
+@router.get("/sources", response_model=SourcesOut, summary="Sources: clocks, counts, problems")
+def sources(world: WorldDep) -> SourcesOut:
+    """Every source seen: clock offset and uncertainty, exchanges, detections, latest
+    time, late and guard-refused counts and the last problem (``null`` when fine)."""
+    return SourcesOut(sources=[SourceOut.of(s) for s in world.source_statuses()])

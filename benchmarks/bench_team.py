@@ -1,0 +1,146 @@
+"""Team benchmark (issue 11): two-level vs flat, clock offsets with and without sync.
+
+RoboCup (paper 000: 5 peers, 5 opponents, 30 Hz) played through a simulated team
+(:mod:`semwm.sim.team_run`): source clocks off by up to ±3 s, one-way latency
+20-150 ms, a receiver that sorts what it gets by time (hold = largest latency +
+50 ms). Configurations:
+
+* ``flat ideal`` / ``flat sync`` / ``flat no sync``: every detection to one model,
+  with ideal clocks, offset clocks estimated by sync exchanges, offset clocks used
+  as they are;
+* ``2-level <strategy> ideal``: local models report to a global one every 0.1 s,
+  for each report strategy (:mod:`semwm.team`); ``2-level updated sync / no sync``.
+
+Per configuration, mean over the seeds: GOSPA (c = 2), ID switches, peer label rate,
+mean NEES (2 when the covariance is honest), CPU per level, messages and bytes
+between the levels, detections dropped as late, the largest clock estimate error.
+
+    python benchmarks/bench_team.py [--seeds 0 1 2] [--duration 5] [--update-results]
+
+Writes benchmarks/out/team.{json,md}; with ``--update-results``
+benchmarks/results/team.{json,md}.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from baselines import fmt, machine_info, write_results
+
+from semwm.knowledge.loader import load_knowledge
+from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.sim.scenarios import make_scenario
+from semwm.sim.team_run import Network, run_team
+
+HERE = Path(__file__).parent
+LATENCY = (0.02, 0.15)
+OFFSET = 3.0
+
+CONFIGS: list[tuple[str, int, Network, str]] = [
+    ("flat ideal", 1, Network(0.0, LATENCY), "updated"),
+    ("flat sync", 1, Network(OFFSET, LATENCY, sync=True), "updated"),
+    ("flat no sync", 1, Network(OFFSET, LATENCY, sync=False), "updated"),
+    ("2-level all ideal", 2, Network(0.0, LATENCY), "all"),
+    ("2-level updated ideal", 2, Network(0.0, LATENCY), "updated"),
+    ("2-level ci ideal", 2, Network(0.0, LATENCY), "ci"),
+    ("2-level information ideal", 2, Network(0.0, LATENCY), "information"),
+    ("2-level updated sync", 2, Network(OFFSET, LATENCY, sync=True), "updated"),
+    ("2-level updated no sync", 2, Network(OFFSET, LATENCY, sync=False), "updated"),
+]
+
+
+def run(seeds: list[int], duration: float) -> dict[str, Any]:
+    knowledge = load_knowledge(shipped_knowledge_path("robocup.yaml"))
+    rows = []
+    for name, levels, network, strategy in CONFIGS:
+        runs = []
+        for seed in seeds:
+            scenario = make_scenario("robocup", seed, duration=duration)
+            team = run_team(
+                scenario, knowledge, levels=levels, network=network, strategy=strategy, seed=seed
+            )
+            m = team.result.metrics
+            runs.append(
+                {
+                    "seed": seed,
+                    "gospa": m.gospa.total,
+                    "id_switches": m.id_switches,
+                    "detections": team.result.n_detections,
+                    **team.to_dict(),
+                }
+            )
+            print(f"{name} seed {seed}: GOSPA {m.gospa.total:.3f}", flush=True)
+
+        def mean(key: str, runs: list[dict[str, Any]] = runs) -> float | None:
+            values = [r[key] for r in runs if r[key] is not None]
+            return float(np.mean(values)) if values else None
+
+        rows.append(
+            {
+                "name": name,
+                "levels": levels,
+                "strategy": strategy if levels == 2 else None,
+                "max_offset": network.max_offset,
+                "sync": network.sync,
+                "gospa": mean("gospa"),
+                "id_switches": mean("id_switches"),
+                "peer_label_rate": mean("peer_label_rate"),
+                "mean_nees": mean("mean_nees"),
+                "cpu_local_s": float(np.mean([r["cpu_s"]["local"] for r in runs])),
+                "cpu_global_s": float(np.mean([r["cpu_s"]["global"] for r in runs])),
+                "messages": float(np.mean([r["between_levels"]["messages"] for r in runs])),
+                "bytes": float(np.mean([r["between_levels"]["bytes"] for r in runs])),
+                "late_dropped": mean("late_dropped"),
+                "offset_error_max_s": mean("offset_error_max_s"),
+                "runs": runs,
+            }
+        )
+    return {
+        "benchmark": "team",
+        "scenario": {"name": "robocup", "duration": duration, "seeds": seeds,
+                     "max_offset": OFFSET, "latency": list(LATENCY)},
+        "machine": machine_info(),
+        "rows": rows,
+    }  # fmt: skip
+
+
+def markdown(doc: dict[str, Any]) -> str:
+    s = doc["scenario"]
+    lines = [
+        f"# Team: robocup {s['duration']:g} s, seeds {s['seeds']}, clocks ±{s['max_offset']:g} s, "
+        f"latency {s['latency'][0] * 1e3:g}-{s['latency'][1] * 1e3:g} ms",
+        "",
+        f"Machine: {doc['machine']['platform']}, {doc['machine']['cpu_count']} CPUs, "
+        f"Python {doc['machine']['python']}, {doc['machine']['date']}. Means over the seeds.",
+        "",
+        "| configuration | GOSPA | ID switches | peer labels | NEES | CPU local s | CPU global s "
+        "| messages | kB between levels | late dropped | clock error max s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in doc["rows"]:
+        lines.append(
+            f"| {r['name']} | {fmt(r['gospa'])} | {fmt(r['id_switches'])} | "
+            f"{fmt(r['peer_label_rate'])} | {fmt(r['mean_nees'])} | {fmt(r['cpu_local_s'])} | "
+            f"{fmt(r['cpu_global_s'])} | {fmt(r['messages'])} | {fmt(r['bytes'] / 1e3)} | "
+            f"{fmt(r['late_dropped'])} | {fmt(r['offset_error_max_s'])} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--duration", type=float, default=5.0)
+    parser.add_argument("--update-results", action="store_true",
+                        help="write benchmarks/results/ instead of benchmarks/out/")  # fmt: skip
+    args = parser.parse_args()
+    doc = run(args.seeds, args.duration)
+    directory = HERE / ("results" if args.update_results else "out")
+    write_results(directory, "team", doc, markdown(doc), quick=False)
+
+
+if __name__ == "__main__":
+    main()

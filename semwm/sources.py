@@ -1,0 +1,310 @@
+"""Sources (robots, sensors): their clocks, their time guards and what they sent.
+
+A :class:`SourceRegistry` keeps, per source, the offset of its clock
+(:mod:`semwm.clock`), how many detections it sent, the latest time it reached, and
+how many of its detections were refused as late (older than the world's reorder
+window) or by a time guard.
+
+Placing a batch (:meth:`SourceRegistry.place`) puts every detection of a synced
+source at ``stamp + offset`` on the service clock (unsynced sources keep their
+stamps) and applies two guards (issue 15: one absurd stamp must not become the
+world's new time):
+
+* ``max_ahead``: a placed time may be at most this far ahead of the service clock
+  (``now``, read by the caller; skipped when ``now`` is ``None``, as in simulations);
+* ``max_jump``: a source's time may advance at most this much more than the service
+  clock did since its previous accepted detection.
+
+A refused detection changes nothing but the counts and the source's last problem,
+which ``GET /sources`` shows; a completed sync exchange resets the source's jump
+reference (its clock may legitimately move to another epoch then).
+
+Pure: ``now`` is an argument; nothing here reads a clock.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from semwm.clock import ClockEstimate, Exchange
+from semwm.detection import Detection
+
+DetectionLike = Detection | Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class TimeGuard:
+    """Bounds on detection times (s); ``None`` turns a bound off.
+
+    Attributes
+    ----------
+    max_ahead
+        How far a placed detection time may be ahead of the service clock.
+    max_jump
+        How much further a source's time may advance than the service clock did
+        since that source's previous accepted detection.
+    """
+
+    max_ahead: float | None = 10.0
+    max_jump: float | None = 60.0
+
+    def __post_init__(self) -> None:
+        for name in ("max_ahead", "max_jump"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be a finite number >= 0 or None; got {value}")
+
+
+@dataclass(frozen=True)
+class TimeProblem:
+    """A detection refused by a time guard: its index in the batch and why."""
+
+    index: int
+    source: str | None
+    kind: str  # "ahead" or "jump"
+    message: str
+
+
+class TimeGuardError(ValueError):
+    """Detections refused by a time guard; nothing of the batch was applied."""
+
+    def __init__(self, problems: Sequence[TimeProblem]) -> None:
+        self.problems = tuple(problems)
+        super().__init__("; ".join(f"{p.index}.time: {p.message}" for p in self.problems))
+
+
+@dataclass(frozen=True)
+class SourceStatus:
+    """What ``GET /sources`` reports of one source (``name`` ``None``: no source given)."""
+
+    name: str | None
+    synced: bool
+    clock_offset: float | None
+    offset_std: float | None
+    delay: float | None
+    exchanges: int
+    detections: int
+    last_time: float | None
+    late: int
+    refused: int
+    problem: str | None
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "name": self.name,
+            "synced": self.synced,
+            "clock_offset": self.clock_offset,
+            "offset_std": self.offset_std,
+            "delay": self.delay,
+            "exchanges": self.exchanges,
+            "detections": self.detections,
+            "last_time": self.last_time,
+            "late": self.late,
+            "refused": self.refused,
+            "problem": self.problem,
+        }
+
+
+@dataclass
+class _Record:
+    clock: ClockEstimate
+    detections: int = 0
+    last_time: float | None = None  # latest accepted placed time (service clock)
+    last_at: float | None = None  # service clock when it was accepted
+    late: int = 0
+    refused: int = 0
+    problem: str | None = None
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A batch placed on the service clock, not yet applied.
+
+    ``detections`` are the batch with placed times, in its order; ``latest`` maps
+    each source to its latest placed time in the batch and ``counts`` to how many
+    detections it has there.
+    """
+
+    detections: tuple[DetectionLike, ...]
+    latest: dict[str | None, float] = field(default_factory=dict)
+    counts: dict[str | None, int] = field(default_factory=dict)
+
+
+def _field(d: DetectionLike, name: str) -> Any:
+    if isinstance(d, Detection):
+        return getattr(d, name)
+    return d.get(name)
+
+
+def _with_time(d: DetectionLike, time: float) -> DetectionLike:
+    if isinstance(d, Detection):
+        return d.model_copy(update={"time": time})
+    return {**d, "time": time}
+
+
+class SourceRegistry:
+    """Clocks, time guards and counts of every source.
+
+    Parameters
+    ----------
+    guard
+        The time guards (:class:`TimeGuard`).
+    window, best
+        The clock filter of :class:`semwm.clock.ClockEstimate`.
+    """
+
+    def __init__(self, guard: TimeGuard | None = None, *, window: int = 8, best: int = 3) -> None:
+        self.guard = guard or TimeGuard()
+        ClockEstimate(window, best)  # fail early on bad settings
+        self._window, self._best = window, best
+        self._records: dict[str | None, _Record] = {}
+
+    def _record(self, name: str | None) -> _Record:
+        record = self._records.get(name)
+        if record is None:
+            record = self._records[name] = _Record(ClockEstimate(self._window, self._best))
+        return record
+
+    # -- clocks ---------------------------------------------------------------------------------
+
+    def sync(self, name: str, exchange: Exchange) -> SourceStatus:
+        """Add a finished exchange of source ``name``; its jump reference restarts."""
+        record = self._record(name)
+        record.clock = record.clock.add(exchange)
+        record.last_time = record.last_at = None
+        record.problem = None
+        return self._status(name, record)
+
+    def clock(self, name: str | None) -> ClockEstimate | None:
+        record = self._records.get(name)
+        return record.clock if record is not None else None
+
+    # -- detections -----------------------------------------------------------------------------
+
+    def place(self, detections: Sequence[DetectionLike], now: float | None = None) -> Placement:
+        """Put ``detections`` on the service clock and check the time guards.
+
+        Raises
+        ------
+        TimeGuardError
+            A placed time breaks a guard; the refusal is counted for its source and
+            nothing else changes.
+        """
+        placed: list[DetectionLike] = []
+        problems: list[TimeProblem] = []
+        latest: dict[str | None, float] = {}
+        counts: dict[str | None, int] = {}
+        for index, d in enumerate(detections):
+            source = _field(d, "source")
+            stamp = _field(d, "time")
+            record = self._records.get(source)
+            time = stamp
+            if record is not None and record.clock.synced and isinstance(stamp, int | float):
+                time = record.clock.to_service(float(stamp))
+            if isinstance(time, int | float) and not isinstance(time, bool):
+                problem = self._check(index, source, float(stamp), float(time), record, now)
+                if problem is not None:
+                    problems.append(problem)
+                latest[source] = max(latest.get(source, -math.inf), float(time))
+            counts[source] = counts.get(source, 0) + 1
+            placed.append(_with_time(d, time) if time is not stamp else d)
+        if problems:
+            for p in problems:
+                record = self._record(p.source)
+                record.refused += 1
+                record.problem = p.message
+            raise TimeGuardError(problems)
+        return Placement(tuple(placed), latest, counts)
+
+    def _check(
+        self,
+        index: int,
+        source: str | None,
+        stamp: float,
+        time: float,
+        record: _Record | None,
+        now: float | None,
+    ) -> TimeProblem | None:
+        who = f"source {source!r}" if source is not None else "a detection without source"
+        where = f"time {stamp:g} s" + (f" (placed at {time:.6g} s)" if time != stamp else "")
+        ahead = self.guard.max_ahead
+        if now is not None and ahead is not None and time - now > ahead:
+            return TimeProblem(
+                index,
+                source,
+                "ahead",
+                f"{where} of {who} is {time - now:.6g} s ahead of the service clock "
+                f"({now:.6g} s); the bound is max_ahead = {ahead:g} s: sync the source's clock "
+                f"(POST /sources/NAME/sync) or fix its stamps",
+            )
+        jump = self.guard.max_jump
+        if jump is not None and record is not None and record.last_time is not None:
+            elapsed = (
+                (now - record.last_at) if now is not None and record.last_at is not None else 0
+            )
+            advance = time - record.last_time
+            if advance - max(elapsed, 0.0) > jump:
+                return TimeProblem(
+                    index,
+                    source,
+                    "jump",
+                    f"{where} of {who} jumps {advance:.6g} s past its previous time "
+                    f"{record.last_time:.6g} s while the service clock moved {elapsed:.3g} s; "
+                    f"the bound is max_jump = {jump:g} s: a sync exchange restarts the source's "
+                    f"time reference",
+                )
+        return None
+
+    def accepted(self, placement: Placement, now: float | None = None) -> None:
+        """Count a placed batch that the world model applied."""
+        for source, count in placement.counts.items():
+            record = self._record(source)
+            record.detections += count
+            latest = placement.latest.get(source)
+            if latest is not None and (record.last_time is None or latest > record.last_time):
+                record.last_time = latest
+                record.last_at = now
+            record.problem = None
+
+    def late(self, placement: Placement, message: str) -> None:
+        """Count a placed batch refused as older than the world's reorder window."""
+        for source, count in placement.counts.items():
+            record = self._record(source)
+            record.late += count
+            record.problem = message
+
+    def forget_times(self) -> None:
+        """Drop every source's time reference (the world was reset); clocks stay."""
+        for record in self._records.values():
+            record.last_time = record.last_at = None
+            record.problem = None
+
+    # -- report ---------------------------------------------------------------------------------
+
+    def _status(self, name: str | None, record: _Record) -> SourceStatus:
+        clock = record.clock
+        return SourceStatus(
+            name=name,
+            synced=clock.synced,
+            clock_offset=clock.offset,
+            offset_std=clock.offset_std,
+            delay=clock.delay,
+            exchanges=clock.count,
+            detections=record.detections,
+            last_time=record.last_time,
+            late=record.late,
+            refused=record.refused,
+            problem=record.problem,
+        )
+
+    def status(self, name: str | None = None) -> SourceStatus | None:
+        record = self._records.get(name)
+        return self._status(name, record) if record is not None else None
+
+    def statuses(self) -> list[SourceStatus]:
+        """Every source seen, by name (the nameless one first)."""
+        names = sorted(self._records, key=lambda n: (n is not None, n or ""))
+        return [self._status(n, self._records[n]) for n in names]
