@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import ipaddress
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, SecretStr, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -130,6 +130,16 @@ class Settings(BaseSettings):
         if self.allowed_hosts is not None:
             return list(self.allowed_hosts)
         return list(dict.fromkeys([*LOOPBACK_NAMES, self.host]))
+
+    def uvicorn_options(self) -> dict[str, Any]:
+        """Where uvicorn listens and its limits against slow or too many clients."""
+        return {
+            "host": self.host,
+            "port": self.port,
+            "timeout_keep_alive": self.timeout_keep_alive,
+            "limit_concurrency": self.limit_concurrency,
+            "h11_max_incomplete_event_size": 64 * 1024,
+        }
 
     def bind_problem(self) -> str | None:
         """Why ``host`` must not be bound with these settings, or ``None``."""

@@ -20,9 +20,7 @@ def running_server(settings: Settings, timeout: float = 20.0) -> Iterator[str]:
     ``settings.port`` 0 binds a free port chosen by the system; the URL carries the
     port actually bound. The server is shut down when the block exits.
     """
-    config = uvicorn.Config(
-        create_app(settings), host=settings.host, port=settings.port, log_level="warning"
-    )
+    config = uvicorn.Config(create_app(settings), **settings.uvicorn_options(), log_level="warning")
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="semwm-uvicorn", daemon=True)
     thread.start()
