@@ -18,7 +18,7 @@ from pydantic import BaseModel
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 from api.deps import get_world
-from api.errors import install_error_handlers
+from api.errors import BugBarrier, install_error_handlers
 from api.guard import RequestGuard
 from api.persistence import attach_persistence
 from api.routes import detections, knowledge, persistence, system, world
@@ -89,8 +89,10 @@ def create_app(settings: Settings) -> FastAPI:
 def _add_guards(app: FastAPI, settings: Settings) -> None:
     """Tokens, browser safety and body limits (:mod:`api.guard`), CORS, allowed hosts.
 
-    The last added runs first: the ``Host`` check, then CORS (preflights), then the guard.
+    The last added runs first: the ``Host`` check, then CORS (preflights), then the
+    guard, then the barrier that answers a bug with a 500.
     """
+    app.add_middleware(BugBarrier)
     app.add_middleware(
         RequestGuard,
         routes=app.router.routes,

@@ -14,6 +14,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 Loc = tuple[str | int, ...]
 
@@ -132,3 +133,35 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(ApiError, on_api_error)
     app.add_exception_handler(RequestValidationError, on_validation_error)
     app.add_exception_handler(Exception, on_bug)
+
+
+class BugBarrier:
+    """Answer a bug with a 500 and keep the connection.
+
+    Starlette's outermost error handler sends the 500 and then re-raises, and uvicorn
+    answers a re-raised error by closing the connection (clients saw "connection
+    reset"). This middleware, inside it, logs the bug and answers it instead.
+    """
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = False
+
+        async def watched(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, receive, watched)
+        except Exception as exc:
+            logger.exception("unhandled error in %s %s", scope["method"], scope["path"])
+            if started:
+                raise
+            detail = f"internal error ({type(exc).__name__}); see the server log"
+            await JSONResponse(status_code=500, content={"detail": detail})(scope, receive, send)

@@ -23,10 +23,10 @@ from __future__ import annotations
 
 import hmac
 import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 
 from starlette.exceptions import HTTPException
-from starlette.routing import BaseRoute, Match
+from starlette.routing import BaseRoute
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 WRITE_METHODS = frozenset({"POST", "PUT", "PATCH", "DELETE"})
@@ -56,20 +56,25 @@ def is_json(content_type: str) -> bool:
     )
 
 
+def _flat(routes: Sequence[BaseRoute]) -> Iterator[BaseRoute]:
+    """Every route, including those of routers FastAPI keeps as one included entry."""
+    for route in routes:
+        inner = getattr(route, "original_router", None)
+        if inner is not None:
+            yield from _flat(inner.routes)
+        else:
+            yield route
+
+
 def allowed_methods(routes: Sequence[BaseRoute], scope: Scope) -> list[str]:
     """Every method some route serves at the request's path."""
+    path = scope["path"]
     methods: set[str] = set()
-    for route in routes:
-        match, _ = route.matches({**scope, "method": "GET"})
+    for route in _flat(routes):
+        regex = getattr(route, "path_regex", None)
         route_methods = getattr(route, "methods", None)
-        if route_methods is None:
-            continue
-        if match is not Match.NONE:
+        if regex is not None and route_methods and regex.match(path):
             methods |= set(route_methods)
-            continue
-        for method in route_methods:
-            if route.matches({**scope, "method": method})[0] is Match.FULL:
-                methods |= set(route_methods)
     if methods:
         methods.add("OPTIONS")
         if "GET" in methods:
