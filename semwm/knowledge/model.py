@@ -27,7 +27,7 @@ MAX_COORDINATE = 1e6
 """m: the largest absolute coordinate (region bounds, known objects)."""
 MAX_RATE = 1e6
 """Hz: the largest detection, appearance or clutter frequency."""
-MAX_HYPOTHESES = 100_000
+MAX_HYPOTHESES = 1_000_000
 """The largest n_hyp,max."""
 
 Entry = Annotated[float, Field(ge=-MAX_MAGNITUDE, le=MAX_MAGNITUDE, allow_inf_nan=False)]
