@@ -207,7 +207,7 @@ def test_a_read_token_guards_reads_and_health_details(sim1: Path) -> None:
         assert client.get("/world").status_code == 401
         assert client.get("/health").json() == {
             "status": "ok", "knowledge": None, "time": None, "hypotheses": None,
-            "objects": None, "commit": None,
+            "objects": None, "commit": None, "hypotheses_log10_joint": None,
         }  # fmt: skip
         assert client.get("/ready").status_code == 200
         for token in (READ, TOKEN):
