@@ -12,11 +12,14 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
 from pydantic import BaseModel
+from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 from api.deps import get_world
-from api.errors import install_error_handlers
+from api.errors import BugBarrier, install_error_handlers
+from api.guard import RequestGuard
 from api.persistence import attach_persistence
 from api.routes import detections, knowledge, local, persistence, sources, system, world
 from api.schemas import DetectionBatch, DetectionIn
@@ -54,6 +57,9 @@ def create_app(settings: Settings) -> FastAPI:
                 reorder_window=settings.reorder_window,
                 write_back=settings.write_back,
                 time_guard=TimeGuard(settings.max_ahead, settings.max_jump),
+                max_sources=settings.max_sources,
+                idempotency_keys=settings.idempotency_keys,
+                stuck_after=settings.stuck_after,
             )
             logger.info("world model built from %s", settings.knowledge)
         with attach_persistence(app, settings):
@@ -64,6 +70,7 @@ def create_app(settings: Settings) -> FastAPI:
     install_error_handlers(app)
     for module in (detections, world, knowledge, system, persistence, sources, local):
         app.include_router(module.router)
+    _add_guards(app, settings)
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
@@ -79,6 +86,32 @@ def create_app(settings: Settings) -> FastAPI:
 
     app.openapi = openapi  # type: ignore[method-assign]
     return app
+
+
+def _add_guards(app: FastAPI, settings: Settings) -> None:
+    """Tokens, browser safety and body limits (:mod:`api.guard`), CORS, allowed hosts.
+
+    The last added runs first: the ``Host`` check, then CORS (preflights), then the
+    guard, then the barrier that answers a bug with a 500.
+    """
+    app.add_middleware(BugBarrier)
+    app.add_middleware(
+        RequestGuard,
+        routes=app.router.routes,
+        token=settings.token.get_secret_value() if settings.token else None,
+        read_token=settings.read_token.get_secret_value() if settings.read_token else None,
+        origins=settings.cors_origins,
+        max_body=settings.max_body,
+    )
+    if settings.cors_origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=list(settings.cors_origins),
+            allow_methods=["GET", "POST", "PUT"],
+            allow_headers=["Authorization", "Content-Type", "Idempotency-Key"],
+            expose_headers=["X-Semwm-Commit", "Idempotent-Replayed"],
+        )
+    app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.hosts())
 
 
 def _add_schemas(schema: dict[str, Any], models: tuple[type[BaseModel], ...]) -> None:

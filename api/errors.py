@@ -14,6 +14,8 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 Loc = tuple[str | int, ...]
 
@@ -129,6 +131,56 @@ def install_error_handlers(app: FastAPI) -> None:
             content={"detail": f"internal error ({type(exc).__name__}); see the server log"},
         )
 
+    async def on_http_error(request: Request, exc: Exception) -> JSONResponse:
+        """FastAPI answers a body it cannot decode (not UTF-8 JSON) with 400; the API's
+        contract for a body that is not valid JSON is 422 with the field path."""
+        assert isinstance(exc, StarletteHTTPException)
+        if exc.status_code == 400 and exc.detail == "There was an error parsing the body":
+            item = {
+                "loc": ["body"],
+                "msg": "the body is not valid JSON (send UTF-8 JSON with Content-Type: "
+                "application/json)",
+                "type": "json_invalid",
+            }
+            return JSONResponse(status_code=422, content={"detail": [item]})
+        headers = getattr(exc, "headers", None)
+        return JSONResponse(
+            status_code=exc.status_code, content={"detail": exc.detail}, headers=headers
+        )
+
     app.add_exception_handler(ApiError, on_api_error)
     app.add_exception_handler(RequestValidationError, on_validation_error)
+    app.add_exception_handler(StarletteHTTPException, on_http_error)
     app.add_exception_handler(Exception, on_bug)
+
+
+class BugBarrier:
+    """Answer a bug with a 500 and keep the connection.
+
+    Starlette's outermost error handler sends the 500 and then re-raises, and uvicorn
+    answers a re-raised error by closing the connection (clients saw "connection
+    reset"). This middleware, inside it, logs the bug and answers it instead.
+    """
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = False
+
+        async def watched(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, receive, watched)
+        except Exception as exc:
+            logger.exception("unhandled error in %s %s", scope["method"], scope["path"])
+            if started:
+                raise
+            detail = f"internal error ({type(exc).__name__}); see the server log"
+            await JSONResponse(status_code=500, content={"detail": detail})(scope, receive, send)

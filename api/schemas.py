@@ -10,18 +10,32 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from semwm.knowledge import ClassSpec, ResolvedClass
 
+MAX_COORDINATE = 1e6
+"""m: the largest absolute coordinate a detection may have (1000 km)."""
+MAX_NAME = 256
+"""The longest source, class, detector or label (characters)."""
+VARIANCE_RANGE = (1e-12, 1e6)
+"""m^2: the range of a covariance's eigenvalues (1 micrometre to 1 km standard deviation)."""
+
 Finite = Annotated[float, Field(allow_inf_nan=False)]
-Vector = Annotated[list[Finite], Field(min_length=2, max_length=3)]
+Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
+Vector = Annotated[list[Coordinate], Field(min_length=2, max_length=3)]
+Name = Annotated[str, Field(min_length=1, max_length=MAX_NAME)]
 
 
 class Body(BaseModel):
-    """Base of request bodies: unknown keys are refused, not silently dropped."""
+    """Base of request bodies: unknown keys are refused, not silently dropped.
 
-    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
+    Strict: a number must be a JSON number (not ``"12.3"``, not ``true``), text must
+    be a JSON string.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True, strict=True)
 
 
 DETECTION_EXAMPLE: dict[str, Any] = {
@@ -39,16 +53,19 @@ class DetectionIn(Body):
     model_config = ConfigDict(json_schema_extra={"examples": [DETECTION_EXAMPLE]})
 
     time: Finite = Field(description="When the object was seen (s).")
-    cls: str = Field(alias="class", min_length=1, description="The detected class, e.g. 'Cup'.")
+    cls: Name = Field(alias="class", description="The detected class, e.g. 'Cup'.")
     position: Vector = Field(description="Measured position (m): [x, y] or [x, y, z].")
-    covariance: list[list[Finite]] | None = Field(
+    covariance: (
+        Annotated[list[Annotated[list[Finite], Field(max_length=3)]], Field(max_length=3)] | None
+    ) = Field(
         default=None,
-        description="Measurement noise (m^2, d x d, symmetric positive definite); "
-        "defaults to the detector's or the class's.",
+        description="Measurement noise (m^2, d x d, symmetric positive definite, eigenvalues "
+        f"{VARIANCE_RANGE[0]:g} to {VARIANCE_RANGE[1]:g}); defaults to the detector's or the "
+        "class's.",
     )
-    source: str | None = Field(default=None, description="Robot or sensor id.")
-    detector: str | None = Field(default=None, description="Detector name from the knowledge.")
-    label: str | None = Field(default=None, description="An identity, e.g. a robot's own id.")
+    source: Name | None = Field(default=None, description="Robot or sensor id.")
+    detector: Name | None = Field(default=None, description="Detector name from the knowledge.")
+    label: Name | None = Field(default=None, description="An identity, e.g. a robot's own id.")
     sensor_position: Vector | None = Field(
         default=None, description="Where the sensor was (m), for detector ranges."
     )
@@ -61,6 +78,16 @@ class DetectionIn(Body):
             raise ValueError(
                 f"covariance must be a square matrix; found {len(value)} rows of lengths {lengths}"
             )
+        if value:
+            matrix = np.asarray(value, dtype=float)
+            if np.allclose(matrix, matrix.T, rtol=1e-9, atol=1e-12):
+                low, high = VARIANCE_RANGE
+                eigenvalues = np.linalg.eigvalsh(matrix)
+                if eigenvalues.min() > 0 and (eigenvalues.min() < low or eigenvalues.max() > high):
+                    raise ValueError(
+                        f"covariance eigenvalues must lie in [{low:g}, {high:g}] m^2; found "
+                        f"{eigenvalues.min():.3g} to {eigenvalues.max():.3g}"
+                    )
         return value
 
     def to_domain(self) -> dict[str, Any]:
@@ -231,13 +258,25 @@ class HealthOut(BaseModel):
     )
 
     status: str = "ok"
-    knowledge: str | None
-    time: float | None
-    hypotheses: int = Field(description="hypotheses stored (the sum over clusters)")
-    hypotheses_log10_joint: float = Field(
-        default=0.0, description="log10 of the number of global hypotheses"
+    knowledge: str | None = Field(default=None, description="Readers only.")
+    time: float | None = Field(default=None, description="Readers only.")
+    hypotheses: int | None = Field(
+        default=None, description="Readers only: hypotheses stored (the sum over clusters)."
     )
-    objects: int
+    hypotheses_log10_joint: float | None = Field(
+        default=None, description="Readers only: log10 of the number of global hypotheses."
+    )
+    objects: int | None = Field(default=None, description="Readers only.")
+    commit: int | None = Field(
+        default=None, description="Readers only: the number of the last accepted change."
+    )
+
+
+class ReadyOut(BaseModel):
+    """Readiness: ``ready``, or ``not ready`` with the reasons."""
+
+    status: str
+    reasons: list[str]
 
 
 class ErrorItem(BaseModel):

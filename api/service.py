@@ -11,12 +11,21 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Any, Generic, Protocol, TypeVar
 
-from api.errors import ConflictError, InvalidError, KnowledgeFileError, Loc, NotFoundError
+from api.errors import (
+    ApiError,
+    ConflictError,
+    InvalidError,
+    KnowledgeFileError,
+    Loc,
+    NotFoundError,
+)
 from semwm import IngestResult, WorldModel, load_knowledge
 from semwm.clock import Exchange
 from semwm.detection import Detection, DetectionError, DetectionProblem, OutOfOrderError
@@ -27,6 +36,40 @@ from semwm.team import LocalModel
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 
 T = TypeVar("T")
+
+COMMIT_HEADER = "X-Semwm-Commit"
+"""The response header numbering accepted changes 1, 2, ... in the order they were applied."""
+
+
+@dataclass(frozen=True)
+class Committed(Generic[T]):
+    """What a change of the world returned, with its place in the commit order.
+
+    ``commit`` numbers the accepted changes of the service 1, 2, ... in the order they
+    were applied; ``replayed`` is true when an idempotency key had been seen and the
+    earlier answer is given again (nothing was applied).
+    """
+
+    value: T
+    commit: int
+    replayed: bool = False
+
+
+def _save(model: WorldModel) -> dict[str, Any]:
+    """The model's attributes, with top-level containers copied: enough to restore it.
+
+    The tracking state itself is immutable; only the model's own dicts and lists are
+    changed in place, so a shallow copy of each restores the model exactly.
+    """
+    return {
+        name: value.copy() if isinstance(value, dict | list | set) else value
+        for name, value in vars(model).items()
+    }
+
+
+def _restore(model: WorldModel, saved: dict[str, Any]) -> None:
+    vars(model).clear()
+    vars(model).update(saved)
 
 
 def known_list(names: Sequence[str]) -> str:
@@ -88,6 +131,9 @@ class WorldService:
         knowledge_path: Path | None = None,
         write_back: bool = False,
         *,
+        max_sources: int = 1000,
+        idempotency_keys: int = 1024,
+        stuck_after: float = 30.0,
         time_guard: TimeGuard | None = None,
         clock: Callable[[], float] = time.time,
     ) -> None:
@@ -95,6 +141,15 @@ class WorldService:
         self._lock = threading.Lock()
         self.knowledge_path = knowledge_path
         self.write_back = write_back
+        self.max_sources = max_sources
+        self.idempotency_keys = idempotency_keys
+        self.stuck_after = stuck_after
+        self._commit = 0
+        self._busy_since: float | None = None
+        self._failure: str | None = None
+        self._sources: set[str] = set()
+        self._recent: OrderedDict[str, Committed[IngestResult]] = OrderedDict()
+        self._summary = self._summarise()
         self.hooks: list[ChangeHook] = []
         self.sources = SourceRegistry(time_guard)
         self._sources_lock = threading.Lock()  # taken inside self._lock, never around it
@@ -103,8 +158,9 @@ class WorldService:
 
     def use_model(self, model: WorldModel) -> None:
         """Serve ``model`` from now on (the one a data directory restored)."""
-        with self._lock:
+        with self._locked():
             self._model = model
+            self._summary = self._summarise()
 
     @property
     def model(self) -> WorldModel:
@@ -112,8 +168,8 @@ class WorldService:
         return self._model
 
     @contextmanager
-    def _change(self, record: Record) -> Iterator[None]:
-        """Apply a change inside every hook's ``applying`` (call with the lock held)."""
+    def _hooked(self, record: Record) -> Iterator[None]:
+        """Apply a change inside every hook's ``applying`` (inside :meth:`_change`)."""
         with ExitStack() as stack:
             for hook in self.hooks:
                 stack.enter_context(hook.applying(record))
@@ -121,57 +177,125 @@ class WorldService:
 
     @classmethod
     def from_file(
-        cls,
-        path: Path,
-        reorder_window: float = 0.5,
-        write_back: bool = False,
-        time_guard: TimeGuard | None = None,
+        cls, path: Path, reorder_window: float = 0.5, write_back: bool = False, **options: Any
     ) -> WorldService:
         """Load ``path`` and build the world model (raises :class:`KnowledgeError`)."""
         return cls(
             WorldModel(load_knowledge(path), reorder_window=reorder_window),
             path,
             write_back,
-            time_guard=time_guard,
+            **options,
         )
+
+    # -- the lock and the commit order ----------------------------------------------------------
+
+    @contextmanager
+    def _locked(self) -> Iterator[None]:
+        """Hold the world's lock, noting since when (for ``/ready``)."""
+        with self._lock:
+            self._busy_since = time.monotonic()
+            try:
+                yield
+            finally:
+                self._busy_since = None
+
+    @contextmanager
+    def _change(self) -> Iterator[None]:
+        """One change of the model, applied whole or not at all (hold :meth:`_locked`).
+
+        Any exception (a refusal or a bug) restores the model as it was before, so a
+        failed request changes nothing; a bug is remembered for ``/ready``. A change
+        that completes gets the next commit number.
+        """
+        saved = _save(self._model)
+        sources = set(self._sources)
+        try:
+            yield
+        except BaseException as error:
+            _restore(self._model, saved)
+            self._sources = sources
+            if not isinstance(error, ApiError):
+                self._failure = f"{type(error).__name__} in the last change; it was undone"
+            raise
+        self._commit += 1
+        self._failure = None
+        self._summary = self._summarise()
+
+    def _summarise(self) -> dict[str, Any]:
+        return {
+            "time": self._model.latest_time,
+            "hypotheses": self._model.hypothesis_count,
+            "hypotheses_log10_joint": self._model.log10_joint_hypotheses,
+            "objects": self._model.object_count,
+            "commit": self._commit,
+        }
 
     # -- detections ---------------------------------------------------------------------------
 
-    def ingest(self, detections: Sequence[dict[str, Any]], batch: bool) -> IngestResult:
-        """Apply ``detections`` whole, or raise :class:`InvalidError`/:class:`ConflictError`."""
-        with self._lock:
+    def ingest(
+        self, detections: Sequence[dict[str, Any]], batch: bool, key: str | None = None
+    ) -> Committed[IngestResult]:
+        """Apply ``detections`` whole, or raise :class:`InvalidError`/:class:`ConflictError`.
+
+        ``key`` (an idempotency key): a key seen among the recent ones is answered as
+        the first time, and nothing is applied again.
+        """
+        with self._locked():
+            if key is not None and key in self._recent:
+                self._recent.move_to_end(key)
+                earlier = self._recent[key]
+                return Committed(earlier.value, earlier.commit, replayed=True)
             now = self.clock()
             try:
                 with self._sources_lock:
                     placement = self.sources.place(list(detections), now)
             except TimeGuardError as error:
                 raise InvalidError(_time_items(error, batch)) from error
-            try:
-                placed = [
-                    d.to_dict() if isinstance(d, Detection) else dict(d)
-                    for d in placement.detections
-                ]
-                with self._change(batch_record(placed)):
-                    result = self._model.ingest(placed)
-            except DetectionError as error:
-                raise InvalidError(problems_to_items(error.problems, batch)) from error
-            except OutOfOrderError as error:
-                message = f"{error}; nothing was applied"
-                with self._sources_lock:
-                    self.sources.late(placement, message)
-                unsynced = sorted(
-                    str(s) for s in placement.counts if s is not None and not self._synced(s)
-                )
-                hint = (
-                    f" (unsynced source(s) {', '.join(unsynced)}: sync their clocks with "
-                    "POST /sources/NAME/sync, see GET /sources)"
-                    if unsynced
-                    else ""
-                )
-                raise ConflictError(message + hint) from error
+            placed = [
+                d.to_dict() if isinstance(d, Detection) else dict(d)
+                for d in placement.detections
+            ]
+            with self._change():
+                self._check_sources(placed, batch)
+                try:
+                    with self._hooked(batch_record(placed)):
+                        result = self._model.ingest(placed)
+                except DetectionError as error:
+                    raise InvalidError(problems_to_items(error.problems, batch)) from error
+                except OutOfOrderError as error:
+                    message = f"{error}; nothing was applied"
+                    with self._sources_lock:
+                        self.sources.late(placement, message)
+                    unsynced = sorted(
+                        str(s) for s in placement.counts if s is not None and not self._synced(s)
+                    )
+                    hint = (
+                        f" (unsynced source(s) {', '.join(unsynced)}: sync their clocks with "
+                        "POST /sources/NAME/sync, see GET /sources)"
+                        if unsynced
+                        else ""
+                    )
+                    raise ConflictError(message + hint) from error
             with self._sources_lock:
                 self.sources.accepted(placement, now)
-            return result
+            committed = Committed(result, self._commit)
+            if key is not None and self.idempotency_keys > 0:
+                self._recent[key] = committed
+                while len(self._recent) > self.idempotency_keys:
+                    self._recent.popitem(last=False)
+            return committed
+
+    def _check_sources(self, detections: Sequence[dict[str, Any]], batch: bool) -> None:
+        """Hold at most ``max_sources`` distinct sources (422 for a new one beyond)."""
+        new = {d["source"] for d in detections if d.get("source")} - self._sources
+        if len(self._sources) + len(new) > self.max_sources:
+            first = next(i for i, d in enumerate(detections) if d.get("source") in new)
+            raise InvalidError.one(
+                (*detection_loc([first, "source"], batch),),
+                f"the service holds at most {self.max_sources} distinct sources and has "
+                f"{len(self._sources)}; a new source is refused (reset to start again)",
+            )
+        self._sources |= new
 
     def _synced(self, name: str) -> bool:
         clock = self.sources.clock(name)
@@ -183,7 +307,7 @@ class WorldService:
         """Apply ``detections`` to robot ``robot``'s local model (its own clock), then send
         its report (objects updated since the last one) to the global model. Returns the
         objects reported."""
-        with self._lock:
+        with self._locked():
             local = self._locals.get(robot)
             if local is None:
                 local = LocalModel(robot, self._model.knowledge, detector=None)
@@ -203,7 +327,7 @@ class WorldService:
         return len(report.detections)
 
     def local_world(self, robot: str, time: float | None = None) -> WorldState:
-        with self._lock:
+        with self._locked():
             local = self._locals.get(robot)
             if local is None:
                 raise NotFoundError(
@@ -231,7 +355,7 @@ class WorldService:
         """The domain problems of detections that passed the schema (nothing is applied)."""
         if not detections:
             return []
-        with self._lock:
+        with self._locked():
             try:
                 self._model.validate(list(detections))
             except DetectionError as error:
@@ -257,7 +381,7 @@ class WorldService:
         label: str | None = None,
         min_existence: float | None = None,
     ) -> WorldState:
-        with self._lock:
+        with self._locked():
             self._check_class(cls)
             if near is not None and len(near) - 1 != self._model.knowledge.dimension:
                 dim = self._model.knowledge.dimension
@@ -274,7 +398,7 @@ class WorldService:
                 raise InvalidError.one(("query",), str(error)) from error
 
     def object(self, object_id: int, time: float | None = None) -> WorldObject:
-        with self._lock:
+        with self._locked():
             try:
                 found = self._model.object(object_id, time=time)
             except ValueError as error:
@@ -285,7 +409,7 @@ class WorldService:
 
     def hypotheses(self, limit: int) -> tuple[dict[str, Any], list[HypothesisSummary]]:
         """The counts (stored, clusters, log10 of the joint) and the best hypotheses."""
-        with self._lock:
+        with self._locked():
             counts = {
                 "total": self._model.hypothesis_count,
                 "clusters": self._model.cluster_count,
@@ -294,37 +418,49 @@ class WorldService:
             return counts, list(self._model.hypotheses(limit))
 
     def health(self) -> dict[str, Any]:
-        with self._lock:
-            return {
-                "status": "ok",
-                "knowledge": str(self.knowledge_path) if self.knowledge_path else None,
-                "time": self._model.latest_time,
-                "hypotheses": self._model.hypothesis_count,
-                "hypotheses_log10_joint": self._model.log10_joint_hypotheses,
-                "objects": self._model.object_count,
-            }
+        """A summary of the world as of the last commit; never waits for the lock."""
+        return {
+            "status": "ok",
+            "knowledge": str(self.knowledge_path) if self.knowledge_path else None,
+            **self._summary,
+        }
 
-    def reset(self) -> float | None:
-        with self._lock, self._change(reset_record()):
-            self._model.reset()
-            self._locals = {}
-            with self._sources_lock:
-                self.sources.forget_times()
-            return self._model.latest_time
+    def readiness(self) -> list[str]:
+        """Why the service cannot take requests now (empty: ready); never waits."""
+        reasons = []
+        since = self._busy_since
+        if since is not None and time.monotonic() - since > self.stuck_after:
+            reasons.append(
+                f"one request has held the world for {time.monotonic() - since:.1f} s "
+                f"(more than {self.stuck_after:g} s)"
+            )
+        if self._failure is not None:
+            reasons.append(self._failure)
+        return reasons
+
+    def reset(self) -> Committed[float | None]:
+        with self._locked():
+            with self._change(), self._hooked(reset_record()):
+                self._model.reset()
+                self._sources = set()
+                self._locals = {}
+                with self._sources_lock:
+                    self.sources.forget_times()
+            return Committed(self._model.latest_time, self._commit)
 
     def digest(self, also: Callable[[], T] | None = None) -> tuple[str, T | None]:
         """The digest of the world published now (:func:`semwm.persistence.model_digest`),
         and ``also()`` called under the same lock (a consistent view of both)."""
         from semwm.persistence.replay import model_digest
 
-        with self._lock:
+        with self._locked():
             return model_digest(self._model), also() if also is not None else None
 
     # -- knowledge ----------------------------------------------------------------------------
 
     @property
     def knowledge(self) -> Knowledge:
-        with self._lock:
+        with self._locked():
             return self._model.knowledge
 
     def class_view(self, name: str) -> tuple[Knowledge, ClassSpec]:
@@ -337,7 +473,7 @@ class WorldService:
             f"unknown class {name!r}; known classes: {known_list(list(knowledge.classes))}"
         )
 
-    def put_class(self, name: str, spec: ClassSpec) -> tuple[Knowledge, bool]:
+    def put_class(self, name: str, spec: ClassSpec) -> Committed[tuple[Knowledge, bool]]:
         """Replace or add class ``name``; applied from the next detection.
 
         The new document is resolved like a file; problems become a 422 and nothing
@@ -349,41 +485,70 @@ class WorldService:
                 f"the class name in the body ({spec.name!r}) differs from the one in the path "
                 f"({name!r})",
             )
-        with self._lock:
-            document = self._model.knowledge.document
-            classes = list(document.classes)
-            where = next((i for i, c in enumerate(classes) if c.name == name), None)
-            if where is None:
-                where = len(classes)
-                classes.append(spec)
-            else:
-                classes[where] = spec
-            new_document = KnowledgeDocument.model_validate(
-                {**dict(document), "classes": tuple(classes)}
+        with self._locked():
+            with self._change():
+                document = self._model.knowledge.document
+                classes = list(document.classes)
+                where = next((i for i, c in enumerate(classes) if c.name == name), None)
+                if where is None:
+                    where = len(classes)
+                    classes.append(spec)
+                else:
+                    classes[where] = spec
+                new_document = KnowledgeDocument.model_validate(
+                    {**dict(document), "classes": tuple(classes)}
+                )
+                source = self._model.knowledge.source
+                try:
+                    knowledge = resolve(new_document, source)
+                except KnowledgeError as error:
+                    raise InvalidError(
+                        [_knowledge_item(p.path, p.message, where) for p in error.problems]
+                    ) from error
+                written = False
+                with self._hooked(knowledge_record(knowledge)):
+                    self._replace_knowledge(knowledge, "the edit")
+                    if self.write_back and self.knowledge_path is not None:
+                        self._write_back(new_document, self.knowledge_path)
+                        written = True
+            return Committed((knowledge, written), self._commit)
+
+    def _replace_knowledge(self, knowledge: Knowledge, what: str) -> None:
+        """Use ``knowledge``; 409 if tracked objects hold a class it lacks."""
+        held: dict[str, set[int | None]] = {}
+        for hypothesis in self._model.hypotheses(max(1, self._model.hypothesis_count)):
+            for obj in hypothesis.objects:
+                if obj.cls not in knowledge.classes:
+                    held.setdefault(obj.cls, set()).add(obj.id)
+        if held:
+            named = "; ".join(
+                f"{cls} (objects {', '.join(str(i) for i in sorted(i for i in ids if i))}"
+                f"{' and unpublished ones' if None in ids else ''})"
+                for cls, ids in sorted(held.items())
             )
-            source = self._model.knowledge.source
-            try:
-                knowledge = resolve(new_document, source)
-            except KnowledgeError as error:
-                raise InvalidError(
-                    [_knowledge_item(p.path, p.message, where) for p in error.problems]
-                ) from error
-            try:
-                with self._change(knowledge_record(knowledge)):
-                    self._model.replace_knowledge(knowledge)
-            except ValueError as error:
-                raise ConflictError(
-                    f"the edit conflicts with the tracked objects: {error}"
-                ) from None
-            written = False
-            if self.write_back and self.knowledge_path is not None:
-                from semwm.knowledge.loader import dump_document
+            raise ConflictError(
+                f"{what} removes classes that tracked objects hold: {named}; nothing changed. "
+                "Keep these classes, or POST /reset first"
+            )
+        try:
+            self._model.replace_knowledge(knowledge)
+        except ValueError as error:
+            raise ConflictError(f"{what} conflicts with the tracked objects: {error}") from None
 
-                dump_document(new_document, self.knowledge_path)
-                written = True
-            return knowledge, written
+    @staticmethod
+    def _write_back(document: KnowledgeDocument, path: Path) -> None:
+        """Write ``document`` to ``path`` atomically; a failure is a 409, nothing changed."""
+        from semwm.knowledge.loader import dump_document
 
-    def reload(self) -> Knowledge:
+        try:
+            dump_document(document, path)
+        except OSError as error:
+            raise ConflictError(
+                f"cannot write the knowledge file {path} ({error.strerror or error}); "
+                "the edit was not applied"
+            ) from None
+
+    def reload(self) -> Committed[Knowledge]:
         """Re-read the knowledge file; a broken file leaves the running knowledge as it is."""
         path = self.knowledge_path
         if path is None:
@@ -400,15 +565,10 @@ class WorldService:
                 f"cannot read {path}; the running knowledge is unchanged",
                 [f"{path}: {error.strerror or error}"],
             ) from error
-        with self._lock:
-            try:
-                with self._change(knowledge_record(knowledge)):
-                    self._model.replace_knowledge(knowledge)
-            except ValueError as error:
-                raise ConflictError(
-                    f"the reloaded knowledge conflicts with the tracked objects: {error}"
-                ) from None
-        return knowledge
+        with self._locked():
+            with self._change(), self._hooked(knowledge_record(knowledge)):
+                self._replace_knowledge(knowledge, "the reloaded knowledge")
+            return Committed(knowledge, self._commit)
 
 
 def _time_items(error: TimeGuardError, batch: bool) -> list[dict[str, Any]]:

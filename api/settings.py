@@ -2,11 +2,25 @@
 
 from __future__ import annotations
 
+import ipaddress
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import Field
+from pydantic import Field, SecretStr, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "::1", "[::1]")
+MiB = 1024 * 1024
+
+
+def is_loopback(host: str) -> bool:
+    """Whether binding ``host`` keeps the service on this machine."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
 
 
 class Settings(BaseSettings):
@@ -14,14 +28,15 @@ class Settings(BaseSettings):
 
     Every field can be set from an environment variable named ``SEMWM_<FIELD>``
     (``SEMWM_KNOWLEDGE``, ``SEMWM_PORT``, ...); values given to the constructor
-    (the command line) win over the environment.
+    (the command line) win over the environment. Lists are JSON in the environment
+    (``SEMWM_CORS_ORIGINS='["http://robot.local:3000"]'``).
 
     Attributes
     ----------
     knowledge
         The knowledge file (YAML or XML) the world model is built from.
     host, port
-        Where to listen. Loopback by default: the API has no authentication.
+        Where to listen. Loopback by default.
     reorder_window
         Detections up to this many seconds older than the latest processed one are
         still accepted (re-ordered); older ones are refused with 409.
@@ -42,6 +57,33 @@ class Settings(BaseSettings):
         beyond ``compact_every`` move to archives.
     record
         Record every accepted change and published world to this MCAP file.
+    token, token_file
+        The bearer token every write (POST, PUT) needs; ``token_file`` holds it on its
+        first line. ``None``: writes are open to whoever reaches the port.
+    read_token
+        A bearer token the reads need (the write token also reads). ``None``: reads
+        are open.
+    insecure
+        Allow binding a non-loopback address without a token.
+    cors_origins
+        Web origins (``scheme://host[:port]``) allowed to call the API from a browser.
+        Empty: CORS off, and a write from any other origin is refused with 403.
+    allowed_hosts
+        ``Host`` header values accepted (DNS rebinding guard); ``*`` accepts any.
+        Default: the loopback names and ``host``.
+    max_body
+        The largest request body (bytes); larger ones are refused with 413 before
+        they are read whole.
+    max_sources
+        The most distinct detection sources held in memory (a new one beyond: 422).
+    idempotency_keys
+        How many recent ``Idempotency-Key``/``batch_id`` values are remembered.
+    stuck_after
+        ``/ready`` answers 503 while one request has held the world for longer (s).
+    timeout_keep_alive, limit_concurrency
+        uvicorn: idle keep-alive connections are closed after this many seconds;
+        beyond this many connections at once new ones get 503 (slow clients cannot
+        hold every worker).
     """
 
     model_config = SettingsConfigDict(env_prefix="SEMWM_", frozen=True, extra="ignore")
@@ -59,3 +101,58 @@ class Settings(BaseSettings):
     record: Path | None = None
     max_ahead: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 10.0
     max_jump: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 60.0
+    token: SecretStr | None = None
+    token_file: Path | None = None
+    read_token: SecretStr | None = None
+    insecure: bool = False
+    cors_origins: tuple[str, ...] = ()
+    allowed_hosts: tuple[str, ...] | None = None
+    max_body: Annotated[int, Field(ge=1024)] = 4 * MiB
+    max_sources: Annotated[int, Field(ge=1)] = 1000
+    idempotency_keys: Annotated[int, Field(ge=0)] = 1024
+    stuck_after: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 30.0
+    timeout_keep_alive: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 5.0
+    limit_concurrency: Annotated[int, Field(ge=1)] = 256
+
+    @model_validator(mode="after")
+    def _read_token_file(self) -> Settings:
+        if self.token is None and self.token_file is not None:
+            try:
+                lines = self.token_file.read_text(encoding="utf-8").splitlines()
+            except (OSError, UnicodeDecodeError) as error:
+                raise ValueError(f"cannot read the token file {self.token_file}: {error}") from None
+            first = lines[0].strip() if lines else ""
+            if not first:
+                raise ValueError(f"the token file {self.token_file} is empty")
+            object.__setattr__(self, "token", SecretStr(first))
+        for name in ("token", "read_token"):
+            secret = getattr(self, name)
+            if secret is not None and len(secret.get_secret_value()) < 8:
+                raise ValueError(f"{name} must have at least 8 characters")
+        return self
+
+    def hosts(self) -> list[str]:
+        """The ``Host`` header values accepted."""
+        if self.allowed_hosts is not None:
+            return list(self.allowed_hosts)
+        return list(dict.fromkeys([*LOOPBACK_NAMES, self.host]))
+
+    def uvicorn_options(self) -> dict[str, Any]:
+        """Where uvicorn listens and its limits against slow or too many clients."""
+        return {
+            "host": self.host,
+            "port": self.port,
+            "timeout_keep_alive": self.timeout_keep_alive,
+            "limit_concurrency": self.limit_concurrency,
+            "h11_max_incomplete_event_size": 64 * 1024,
+        }
+
+    def bind_problem(self) -> str | None:
+        """Why ``host`` must not be bound with these settings, or ``None``."""
+        if is_loopback(self.host) or self.token is not None or self.insecure:
+            return None
+        return (
+            f"refusing to bind {self.host} (not loopback) without a token: anyone who "
+            "reaches the port could change the world. Pass --token/--token-file (or "
+            "SEMWM_TOKEN), or --insecure to do it anyway"
+        )

@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 import uvicorn
+from fastapi import FastAPI
 
 from api.app import create_app
 from api.settings import Settings
@@ -20,9 +21,14 @@ def running_server(settings: Settings, timeout: float = 20.0) -> Iterator[str]:
     ``settings.port`` 0 binds a free port chosen by the system; the URL carries the
     port actually bound. The server is shut down when the block exits.
     """
-    config = uvicorn.Config(
-        create_app(settings), host=settings.host, port=settings.port, log_level="warning"
-    )
+    with serving(create_app(settings), settings, timeout) as url:
+        yield url
+
+
+@contextmanager
+def serving(app: FastAPI, settings: Settings, timeout: float = 20.0) -> Iterator[str]:
+    """Serve ``app`` (built from ``settings``, maybe overridden) like :func:`running_server`."""
+    config = uvicorn.Config(app, **settings.uvicorn_options(), log_level="warning")
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="semwm-uvicorn", daemon=True)
     thread.start()

@@ -4,14 +4,18 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body
+from fastapi import APIRouter, Body, Header, Response
 from pydantic import ValidationError
 
 from api.deps import SettingsDep, WorldDep
 from api.errors import InvalidError, validation_items
 from api.schemas import DETECTION_EXAMPLE, DetectionIn, IngestOut, MessageOut, ValidationErrorOut
+from api.service import COMMIT_HEADER
 
 router = APIRouter(tags=["detections"])
+
+MAX_KEY = 200
+"""The longest idempotency key (``Idempotency-Key`` header or ``batch_id``)."""
 
 _EXAMPLES: dict[str, Any] = {
     "single": {"summary": "One detection", "value": DETECTION_EXAMPLE},
@@ -46,6 +50,7 @@ class Parsed:
 
     def __init__(self, batch: bool) -> None:
         self.batch = batch
+        self.batch_id: str | None = None
         self.valid: list[DetectionIn] = []
         self.index: list[int] = []
         self.errors: list[dict[str, Any]] = []
@@ -68,8 +73,20 @@ def parse_body(payload: Any, max_batch: int) -> Parsed:
         parsed.add(payload, 0, ("body",))
         return parsed
     parsed = Parsed(batch=True)
-    for key in sorted(set(payload) - {"detections"}):
-        parsed.problem(["body", key], "unknown field: a batch has only 'detections'", "extra")
+    for key in sorted(set(payload) - {"detections", "batch_id"}):
+        parsed.problem(
+            ["body", key], "unknown field: a batch has only 'detections' and 'batch_id'", "extra"
+        )
+    batch_id = payload.get("batch_id")
+    if batch_id is not None:
+        if isinstance(batch_id, str) and 1 <= len(batch_id) <= MAX_KEY:
+            parsed.batch_id = batch_id
+        else:
+            parsed.problem(
+                ["body", "batch_id"],
+                f"batch_id must be text of 1 to {MAX_KEY} characters",
+                "string_type",
+            )
     items = payload["detections"]
     if not isinstance(items, list):
         parsed.problem(["body", "detections"], "must be a list of detections", "list_type")
@@ -101,6 +118,16 @@ def post_detections(
     world: WorldDep,
     settings: SettingsDep,
     payload: Annotated[Any, Body(openapi_examples=_EXAMPLES)],
+    response: Response,
+    idempotency_key: Annotated[
+        str | None,
+        Header(
+            min_length=1,
+            max_length=MAX_KEY,
+            description="A client's id for this request: posted again (a retry), it is "
+            "answered as the first time and not applied twice. Same as a batch's batch_id.",
+        ),
+    ] = None,
 ) -> IngestOut:
     """Add detections to the world.
 
@@ -108,7 +135,8 @@ def post_detections(
     first: if any detection is invalid the answer is 422 with the field path of
     every problem (``["body", "detections", 3, "position"]``) and nothing is
     applied. A detection older than the latest processed time minus the reorder
-    window gives 409.
+    window gives 409. A repeated ``Idempotency-Key`` header or ``batch_id`` is
+    answered as before and applied once.
     """
     parsed = parse_body(payload, settings.max_batch)
     items = [d.to_domain() for d in parsed.valid]
@@ -116,7 +144,15 @@ def post_detections(
         # Report the domain problems of the others too, so one answer lists them all.
         more = world.domain_problems(items, parsed.index, parsed.batch)
         raise InvalidError(sorted(parsed.errors + more, key=_loc_order))
-    result = world.ingest(items, parsed.batch)
+    if idempotency_key is not None and parsed.batch_id not in (None, idempotency_key):
+        raise InvalidError.one(
+            ("body", "batch_id"), "batch_id differs from the Idempotency-Key header"
+        )
+    committed = world.ingest(items, parsed.batch, key=idempotency_key or parsed.batch_id)
+    response.headers[COMMIT_HEADER] = str(committed.commit)
+    if committed.replayed:
+        response.headers["Idempotent-Replayed"] = "true"
+    result = committed.value
     return IngestOut(applied=result.applied, time=result.time, ignored=result.ignored)
 
 

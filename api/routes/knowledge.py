@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Path
+from fastapi import APIRouter, Body, Path, Response
 
 from api.deps import WorldDep
 from api.schemas import ClassOut, KnowledgeFileErrorOut, MessageOut, ReloadOut, ValidationErrorOut
+from api.service import COMMIT_HEADER
 from semwm.knowledge import ClassSpec, KnowledgeDocument
 
 router = APIRouter(prefix="/knowledge", tags=["knowledge"])
@@ -62,7 +63,10 @@ def get_class(world: WorldDep, name: ClassName) -> ClassOut:
     response_model=ClassOut,
     summary="Replace or add a class",
     responses={
-        409: {"model": MessageOut, "description": "Conflicts with the tracked objects"},
+        409: {
+            "model": MessageOut,
+            "description": "Conflicts with the tracked objects, or write-back failed",
+        },
         422: {"model": ValidationErrorOut, "description": "Rejected; nothing changed"},
     },
 )
@@ -70,6 +74,7 @@ def put_class(
     world: WorldDep,
     name: ClassName,
     spec: Annotated[ClassSpec, Body(openapi_examples=_CLASS_EXAMPLES)],
+    response: Response,
 ) -> ClassOut:
     """Replace class ``name`` (or add it), checked like a knowledge file.
 
@@ -78,7 +83,9 @@ def put_class(
     An accepted edit applies from the next detection, and is written to the
     knowledge file when the service runs with write-back.
     """
-    knowledge, written = world.put_class(name, spec)
+    committed = world.put_class(name, spec)
+    knowledge, written = committed.value
+    response.headers[COMMIT_HEADER] = str(committed.commit)
     return ClassOut(name=name, resolved=knowledge.classes[name], spec=spec, written=written)
 
 
@@ -87,15 +94,21 @@ def put_class(
     response_model=ReloadOut,
     summary="Re-read the knowledge file",
     responses={
-        409: {"model": MessageOut, "description": "No knowledge file"},
+        409: {
+            "model": MessageOut,
+            "description": "No knowledge file, or it lacks classes tracked objects hold",
+        },
         422: {"model": KnowledgeFileErrorOut, "description": "Broken file; nothing changed"},
     },
 )
-def reload_knowledge(world: WorldDep) -> ReloadOut:
+def reload_knowledge(world: WorldDep, response: Response) -> ReloadOut:
     """Re-read the knowledge file; it applies from the next detection.
 
     A broken file gives 422 with one ``FILE:LINE: message`` per problem, and the
-    running knowledge stays.
+    running knowledge stays. A file without a class that tracked objects hold gives
+    409 naming them (reset first, or keep the class).
     """
-    knowledge = world.reload()
+    committed = world.reload()
+    knowledge = committed.value
+    response.headers[COMMIT_HEADER] = str(committed.commit)
     return ReloadOut(knowledge=str(world.knowledge_path), classes=list(knowledge.classes))

@@ -1,22 +1,58 @@
-"""``GET /health`` and ``POST /reset``."""
+"""``GET /health``, ``GET /ready`` and ``POST /reset``."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request, Response
+from fastapi.responses import JSONResponse
 
-from api.deps import WorldDep
-from api.schemas import HealthOut, ResetOut
+from api.deps import SettingsDep, WorldDep
+from api.guard import bearer, token_matches
+from api.schemas import HealthOut, MessageOut, ReadyOut, ResetOut
+from api.service import COMMIT_HEADER
 
 router = APIRouter(tags=["system"])
 
 
 @router.get("/health", response_model=HealthOut, summary="Liveness and a summary")
-def health(world: WorldDep) -> HealthOut:
-    """``ok`` with the knowledge file, the world time and the hypothesis and object counts."""
+def health(world: WorldDep, settings: SettingsDep, request: Request) -> HealthOut:
+    """``ok`` while the process serves requests; it never waits for the world.
+
+    The summary (knowledge file, world time, hypothesis and object counts as of the
+    last accepted change) is given to readers: everyone when reads are open, else
+    only with the read (or write) token.
+    """
+    secrets = [s.get_secret_value() for s in (settings.read_token, settings.token) if s]
+    if settings.read_token is not None and not token_matches(bearer(_headers(request)), secrets):
+        return HealthOut(status="ok")
     return HealthOut.model_validate(world.health())
 
 
-@router.post("/reset", response_model=ResetOut, summary="Forget every object")
-def reset(world: WorldDep) -> ResetOut:
+@router.get(
+    "/ready",
+    response_model=ReadyOut,
+    summary="Readiness: can the world take requests now",
+    responses={503: {"model": ReadyOut, "description": "Not ready, with the reasons"}},
+)
+def ready(world: WorldDep) -> JSONResponse:
+    """200 when the world can take requests; 503 with the reasons while one request
+    has held it longer than ``stuck_after`` or the last change failed internally."""
+    reasons = world.readiness()
+    body = ReadyOut(status="not ready" if reasons else "ready", reasons=reasons)
+    return JSONResponse(body.model_dump(), status_code=503 if reasons else 200)
+
+
+@router.post(
+    "/reset",
+    response_model=ResetOut,
+    summary="Forget every object",
+    responses={401: {"model": MessageOut, "description": "Missing or invalid write token"}},
+)
+def reset(world: WorldDep, response: Response) -> ResetOut:
     """Empty the world: every hypothesis and object is dropped; the knowledge stays."""
-    return ResetOut(time=world.reset())
+    committed = world.reset()
+    response.headers[COMMIT_HEADER] = str(committed.commit)
+    return ResetOut(time=committed.value)
+
+
+def _headers(request: Request) -> dict[str, str]:
+    return {k.lower(): v for k, v in request.headers.items()}

@@ -63,6 +63,8 @@ def get_world(
         str | None,
         Query(
             alias="class",
+            min_length=1,
+            max_length=256,
             description="Only objects of this class or its subclasses ('Can' includes 'CokeCan').",
         ),
     ] = None,

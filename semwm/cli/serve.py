@@ -21,7 +21,9 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="run the HTTP service",
         description="Run the semwm HTTP service (OpenAPI at /docs). Every option can also be "
         "set from the environment: SEMWM_KNOWLEDGE, SEMWM_HOST, SEMWM_PORT, "
-        "SEMWM_REORDER_WINDOW, SEMWM_MAX_BATCH, SEMWM_WRITE_BACK.",
+        "SEMWM_REORDER_WINDOW, SEMWM_MAX_BATCH, SEMWM_WRITE_BACK, SEMWM_TOKEN, SEMWM_TOKEN_FILE, "
+        "SEMWM_READ_TOKEN, SEMWM_INSECURE, SEMWM_CORS_ORIGINS, SEMWM_ALLOWED_HOSTS (JSON lists), "
+        "SEMWM_MAX_BODY, SEMWM_MAX_SOURCES, SEMWM_STUCK_AFTER.",
     )
     parser.add_argument("--knowledge", type=Path, help="knowledge file (YAML or XML)")
     parser.add_argument("--host", help="address to bind (default 127.0.0.1)")
@@ -42,6 +44,7 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="server log level (default: semwm --log-level, else info)",
     )
     add_persistence_options(parser)
+    add_safety_options(parser)
     parser.set_defaults(func=run_serve)
     return parser
 
@@ -72,6 +75,41 @@ def add_persistence_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+SAFETY_OPTIONS = (
+    "token", "token_file", "read_token", "insecure", "cors_origins", "allowed_hosts",
+    "max_body", "max_sources", "stuck_after",
+)  # fmt: skip
+
+
+def add_safety_options(parser: argparse.ArgumentParser) -> None:
+    """Who may change the world, browsers, hosts and limits (docs/api.md, "Safety")."""
+    group = parser.add_argument_group("safety and limits (docs/api.md)")
+    group.add_argument("--token", help="bearer token writes need (or SEMWM_TOKEN)")
+    group.add_argument("--token-file", type=Path, help="file whose first line is the token")
+    group.add_argument("--read-token", help="bearer token reads need (default: reads open)")
+    group.add_argument(
+        "--insecure",
+        action="store_true",
+        default=None,
+        help="allow a non-loopback --host without a token",
+    )
+    group.add_argument(
+        "--cors-origin",
+        dest="cors_origins",
+        action="append",
+        help="web origin allowed to call the API from a browser (repeatable)",
+    )
+    group.add_argument(
+        "--allowed-host",
+        dest="allowed_hosts",
+        action="append",
+        help="Host header value accepted (repeatable; default loopback names and --host)",
+    )
+    group.add_argument("--max-body", type=int, help="largest request body, bytes (4 MiB)")
+    group.add_argument("--max-sources", type=int, help="most distinct sources held (1000)")
+    group.add_argument("--stuck-after", type=float, help="s before /ready says stuck (30)")
+
+
 def run_serve(args: argparse.Namespace) -> int:
     """Start uvicorn with the settings from ``args`` over the environment."""
     import uvicorn
@@ -89,6 +127,7 @@ def run_serve(args: argparse.Namespace) -> int:
             "max_batch",
             "write_back",
             *PERSISTENCE_OPTIONS,
+            *SAFETY_OPTIONS,
         )
         if getattr(args, key, None) is not None
     }
@@ -103,6 +142,8 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CommandError("no knowledge file: pass --knowledge FILE or set SEMWM_KNOWLEDGE")
     if not settings.knowledge.is_file():
         raise CommandError(f"{settings.knowledge}: no such file")
+    if (refusal := settings.bind_problem()) is not None:
+        raise CommandError(refusal, EXIT_USAGE)
     log_level = args.serve_log_level or getattr(args, "log_level", None) or "info"
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=log_level)
+    uvicorn.run(create_app(settings), **settings.uvicorn_options(), log_level=log_level)
     return 0

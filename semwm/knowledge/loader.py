@@ -15,6 +15,9 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
+import os
+import tempfile
 import types
 import typing
 from collections.abc import Callable, Mapping, Sequence
@@ -273,7 +276,16 @@ def analyse_file(path: str | FilePath) -> Analysis:
     """Read, validate and resolve a knowledge file (see :func:`analyse_text`)."""
     fmt = format_of(path)
     content = FilePath(path).read_bytes()
-    return analyse_text(content if fmt == "xml" else content.decode("utf-8"), fmt, str(path))
+    if fmt == "xml":
+        return analyse_text(content, fmt, str(path))
+    try:
+        text = content.decode("utf-8")
+    except UnicodeDecodeError as error:
+        line = content[: error.start].count(b"\n") + 1
+        byte = content[error.start : error.start + 1].hex()
+        problem = Problem(f"the file is not UTF-8 text: byte 0x{byte} cannot be decoded", ())
+        return Analysis((problem.located(str(path), line),), None, None)
+    return analyse_text(text, fmt, str(path))
 
 
 def check_file(path: str | FilePath) -> list[Problem]:
@@ -329,5 +341,26 @@ def document_to_text(document: KnowledgeDocument, fmt: Format) -> str:
 
 
 def dump_document(document: KnowledgeDocument, path: str | FilePath) -> None:
-    """Write ``document`` to ``path`` in the format its extension names."""
-    FilePath(path).write_text(document_to_text(document, format_of(path)), encoding="utf-8")
+    """Write ``document`` to ``path`` in the format its extension names, atomically.
+
+    The text goes to a temporary file beside ``path``, flushed to disk, then renamed
+    over it: a reader sees the old file or the new one, never half of one, and a
+    failure (``OSError``) leaves the old file as it was.
+    """
+    target = FilePath(path)
+    text = document_to_text(document, format_of(target))
+    descriptor, temporary = tempfile.mkstemp(
+        prefix=f".{target.name}.", suffix=".tmp", dir=target.parent
+    )
+    try:
+        with os.fdopen(descriptor, "w", encoding="utf-8") as stream:
+            stream.write(text)
+            stream.flush()
+            os.fsync(stream.fileno())
+        if target.exists():
+            os.chmod(temporary, target.stat().st_mode & 0o7777)
+        os.replace(temporary, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temporary)
+        raise

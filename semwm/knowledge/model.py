@@ -20,12 +20,25 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-Matrix = tuple[tuple[float, ...], ...]
+# Bounds that keep every value physically meaningful (and the arithmetic finite).
+MAX_MAGNITUDE = 1e12
+"""The largest magnitude of a matrix entry, variance, distance or duration."""
+MAX_COORDINATE = 1e6
+"""m: the largest absolute coordinate (region bounds, known objects)."""
+MAX_RATE = 1e6
+"""Hz: the largest detection, appearance or clutter frequency."""
+MAX_HYPOTHESES = 1_000_000
+"""The largest n_hyp,max."""
+
+Entry = Annotated[float, Field(ge=-MAX_MAGNITUDE, le=MAX_MAGNITUDE, allow_inf_nan=False)]
+Matrix = tuple[tuple[Entry, ...], ...]
 """A matrix as a tuple of rows. Checked for shape and definiteness on resolution."""
 
-NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0.0, le=MAX_MAGNITUDE, allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0.0, le=MAX_MAGNITUDE, allow_inf_nan=False)]
 Probability = Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
+Rate = Annotated[float, Field(ge=0.0, le=MAX_RATE, allow_inf_nan=False)]
+Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE, allow_inf_nan=False)]
 
 MotionOrder = Literal["zeroth_order", "first_order"]
 """``zeroth_order``: constant position; ``first_order``: constant velocity."""
@@ -96,8 +109,8 @@ class WorldSettings(Frozen):
     """
 
     dimension: Literal[2, 3] = 3
-    pruning_ratio: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.01
-    max_hypotheses: Annotated[int, Field(ge=1)] = 1000
+    pruning_ratio: Annotated[float, Field(ge=0.0, lt=1.0, allow_inf_nan=False)] = 0.01
+    max_hypotheses: Annotated[int, Field(ge=1, le=MAX_HYPOTHESES)] = 1000
     association_model: Literal["paper", "mht"] = "mht"
     missed_detection_term: bool = True
     min_existence: Annotated[float, Field(gt=0.0, le=1.0)] = 0.5
@@ -105,8 +118,8 @@ class WorldSettings(Frozen):
     label_gate: Positive = 2.0
     label_error_rate: Annotated[float, Field(gt=0.0, lt=1.0)] = 1e-3
     id_memory: Annotated[float, Field(ge=0.0, le=3600.0)] = 5.0
-    gate_probability: Annotated[float, Field(gt=0.0, le=1.0)] = 0.9999
-    region: tuple[tuple[float, float], ...] | None = None
+    gate_probability: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] = 0.9999
+    region: tuple[tuple[Coordinate, Coordinate], ...] | None = None
     default_detector: str | None = None
 
 
@@ -145,7 +158,7 @@ class IMMFilterSpec(Frozen):
     type: Literal["imm"] = "imm"
     models: Annotated[tuple[MotionModelSpec, ...], Field(min_length=2)]
     transition_matrix: Matrix
-    initial_mode_probabilities: tuple[float, ...] | None = None
+    initial_mode_probabilities: tuple[Entry, ...] | None = None
     stationary_velocity_variance: Positive = 1e-4
 
 
@@ -162,7 +175,7 @@ class AppearanceRelation(Frozen):
 
     target: str
     max_distance: Positive
-    frequency: NonNegative
+    frequency: Rate
 
 
 class ClassSpec(Frozen):
@@ -210,8 +223,8 @@ class ClassSpec(Frozen):
 
     name: str
     is_a: tuple[str, ...] = ()
-    detection_frequency: NonNegative | None = None
-    new_frequency: NonNegative | None = None
+    detection_frequency: Rate | None = None
+    new_frequency: Rate | None = None
     appearance: tuple[AppearanceRelation, ...] | None = None
     filter: FilterSpec | None = None
     measurement_noise: Matrix | None = None
@@ -219,7 +232,7 @@ class ClassSpec(Frozen):
     initial_velocity_covariance: Matrix | None = None
     max_position_variance: Positive | None = None
     max_time_without_update: Positive | None = None
-    leave_frequency: NonNegative | None = None
+    leave_frequency: Rate | None = None
     disappearance: tuple[AppearanceRelation, ...] | None = None
     category: Category | None = None
 
@@ -247,7 +260,7 @@ class DetectorSpec(Frozen):
     """
 
     name: str
-    clutter_frequency: NonNegative
+    clutter_frequency: Rate
     measurement_noise: Mapping[str, Matrix] = Field(default_factory=dict)
     range: Positive | None = None
     field_of_view: Annotated[float, Field(gt=0.0, le=360.0)] | None = None
@@ -262,7 +275,7 @@ class KnownObject(Frozen):
     model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
 
     cls: str = Field(alias="class")
-    position: tuple[float, ...]
+    position: tuple[Coordinate, ...]
     name: str | None = None
 
 

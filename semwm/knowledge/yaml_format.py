@@ -18,6 +18,14 @@ from semwm.knowledge.model import KnowledgeDocument
 from semwm.knowledge.problems import Path, Problem
 
 LineMap = dict[Path, int]
+
+MAX_VALUES = 100_000
+"""The most values (mappings, lists, scalars) a file may expand to, aliases included.
+
+Aliases are references: a few hundred bytes can name 10^9 values (an "alias bomb").
+The largest shipped file has a few thousand; reading stops with a located problem
+beyond this.
+"""
 ReadResult = tuple[dict[str, Any] | None, LineMap, list[Problem]]
 """Data for :class:`KnowledgeDocument` (``None`` when unreadable), line map, problems."""
 
@@ -26,15 +34,42 @@ def _line(node: yaml.Node) -> int:
     return int(node.start_mark.line) + 1
 
 
+def _too_many(node: yaml.Node) -> yaml.constructor.ConstructorError:
+    return yaml.constructor.ConstructorError(
+        None,
+        None,
+        f"the document expands to more than {MAX_VALUES} values (aliases or merge keys "
+        "repeat too much)",
+        node.start_mark,
+    )
+
+
+class _LimitedLoader(yaml.SafeLoader):
+    """A safe loader whose ``<<`` merges stop at :data:`MAX_VALUES` entries."""
+
+    def flatten_mapping(self, node: yaml.MappingNode) -> None:
+        super().flatten_mapping(node)  # flattens merged sub-mappings through this method
+        if len(node.value) > MAX_VALUES:
+            raise _too_many(node)
+
+
 class _Builder:
-    """Python values from composed nodes, recording where each path was written."""
+    """Python values from composed nodes, recording where each path was written.
+
+    Counts the values built: aliases are expanded here, so an alias bomb stops at
+    :data:`MAX_VALUES` with the line of the value where it did.
+    """
 
     def __init__(self, loader: yaml.SafeLoader) -> None:
         self.loader = loader
         self.lines: LineMap = {}
         self.problems: list[Problem] = []
+        self.built = 0
 
     def build(self, node: yaml.Node, path: Path) -> Any:
+        self.built += 1
+        if self.built > MAX_VALUES:
+            raise _too_many(node)
         if isinstance(node, yaml.MappingNode):
             self.loader.flatten_mapping(node)  # resolves "<<" merge keys
             result: dict[Any, Any] = {}
@@ -71,7 +106,7 @@ def read_yaml(content: str | bytes) -> ReadResult:
         ``data`` is ``None`` when the text is not well-formed YAML or not a mapping
         at the top (then ``problems`` says so, at its line).
     """
-    loader = yaml.SafeLoader(content)
+    loader = _LimitedLoader(content)
     try:
         node = loader.get_single_node()
         if node is None:

@@ -29,6 +29,7 @@ def knowledge_file(tmp_path: Path) -> Path:
 
 
 def make_app(service: WorldService, **settings: Any) -> FastAPI:
+    settings.setdefault("allowed_hosts", ("testserver",))
     app = create_app(Settings(knowledge=service.knowledge_path, max_batch=MAX_BATCH, **settings))
     app.dependency_overrides[get_world] = lambda: service
     return app

@@ -150,7 +150,7 @@ def test_batch_reports_every_problem_and_applies_nothing(seeded: TestClient) -> 
     [
         ('{"time": 1.0, "class": ', "application/json"),
         ("", "application/json"),
-        ("time=1", "text/plain"),
+        ("time=1", "application/json"),
         ("\xff\xfe", "application/json"),
     ],
     ids=["truncated-json", "empty-body", "not-json", "not-utf8"],

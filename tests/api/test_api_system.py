@@ -48,7 +48,9 @@ def test_settings_from_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: Pa
 
 
 def test_app_factory_builds_the_world_in_the_lifespan(knowledge_file: Path) -> None:
-    app = create_app(Settings(knowledge=knowledge_file, reorder_window=0.25))
+    app = create_app(
+        Settings(knowledge=knowledge_file, reorder_window=0.25, allowed_hosts=("testserver",))
+    )
     assert not hasattr(app.state, "world")  # nothing heavy before start-up
     with TestClient(app) as client:
         assert client.get("/health").json()["knowledge"] == str(knowledge_file)
@@ -100,7 +102,7 @@ ODD_BODIES = [
 
 @pytest.mark.parametrize("content", ODD_BODIES, ids=range(len(ODD_BODIES)))
 def test_no_input_gives_a_5xx(knowledge_file: Path, content: str) -> None:
-    app = create_app(Settings(knowledge=knowledge_file))
+    app = create_app(Settings(knowledge=knowledge_file, allowed_hosts=("testserver",)))
     with TestClient(app, raise_server_exceptions=False) as client:
         before = snapshot(client)
         response = client.post(

@@ -56,7 +56,9 @@ def test_a_recording_cut_short_replays_up_to_its_last_whole_message(
 
 def test_serve_records_and_journals_what_it_acknowledges(tmp_path: Path) -> None:
     recording, data_dir = tmp_path / "serve.mcap", tmp_path / "data"
-    settings = Settings(knowledge=SIM1, port=0, data_dir=data_dir, record=recording)
+    settings = Settings(
+        knowledge=SIM1, port=0, data_dir=data_dir, record=recording, allowed_hosts=("testserver",)
+    )
     with TestClient(create_app(settings)) as client:
         for i in range(10):
             body = {"detections": [{"time": 0.1 * i, "class": "Cup", "position": [1.0, 1.0]}]}
