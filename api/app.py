@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
@@ -22,6 +22,9 @@ from api.routes import detections, knowledge, persistence, system, world
 from api.schemas import DetectionBatch, DetectionIn
 from api.service import WorldService
 from api.settings import Settings
+
+if TYPE_CHECKING:
+    from api.mqtt_bridge import MqttBridge
 
 logger = logging.getLogger("api")
 
@@ -54,8 +57,13 @@ def create_app(settings: Settings) -> FastAPI:
                 write_back=settings.write_back,
             )
             logger.info("world model built from %s", settings.knowledge)
-        with attach_persistence(app, settings):
-            yield
+        bridge = _start_mqtt(app, settings) if settings.mqtt is not None else None
+        try:
+            with attach_persistence(app, settings):
+                yield
+        finally:
+            if bridge is not None:
+                bridge.stop()
 
     app = FastAPI(title="semwm", version="0.1.0", description=DESCRIPTION, lifespan=lifespan)
     app.state.settings = settings
@@ -77,6 +85,14 @@ def create_app(settings: Settings) -> FastAPI:
 
     app.openapi = openapi  # type: ignore[method-assign]
     return app
+
+
+def _start_mqtt(app: FastAPI, settings: Settings) -> MqttBridge:
+    """Join the broker of ``settings.mqtt`` with the app's world service (docs/mqtt.md)."""
+    from api.mqtt_bridge import start_bridge
+
+    service = getattr(app.state, "world", None) or app.dependency_overrides[get_world]()
+    return start_bridge(service, settings)
 
 
 def _add_schemas(schema: dict[str, Any], models: tuple[type[BaseModel], ...]) -> None:

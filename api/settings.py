@@ -5,8 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from semwm.mqtt.protocol import check_topic_part, parse_broker_url
 
 
 class Settings(BaseSettings):
@@ -38,6 +40,11 @@ class Settings(BaseSettings):
         beyond ``compact_every`` move to archives.
     record
         Record every accepted change and published world to this MCAP file.
+    mqtt, mqtt_prefix, mqtt_world_rate, mqtt_client_id
+        Join the MQTT broker at ``mqtt://HOST:PORT`` (see docs/mqtt.md): detections
+        in on ``<prefix>/detections/<source>``, the world out on ``<prefix>/world`` at
+        most ``mqtt_world_rate`` times a second; the client id names the bridge's
+        persistent session (default ``semwm-<prefix>``).
     """
 
     model_config = SettingsConfigDict(env_prefix="SEMWM_", frozen=True, extra="ignore")
@@ -53,3 +60,20 @@ class Settings(BaseSettings):
     snapshot_every: Annotated[int, Field(ge=1)] = 1000
     compact_every: Annotated[int, Field(ge=1)] = 100_000
     record: Path | None = None
+    mqtt: str | None = None
+    mqtt_prefix: str = "semwm"
+    mqtt_world_rate: Annotated[float, Field(gt=0.0)] = 10.0
+    mqtt_client_id: Annotated[str | None, Field(min_length=1)] = None
+
+    @field_validator("mqtt")
+    @classmethod
+    def _broker_url(cls, value: str | None) -> str | None:
+        if value is not None:
+            parse_broker_url(value)
+        return value
+
+    @field_validator("mqtt_prefix")
+    @classmethod
+    def _topic_prefix(cls, value: str) -> str:
+        check_topic_part("prefix", value, allow_slash=True)
+        return value

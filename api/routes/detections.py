@@ -10,6 +10,8 @@ from pydantic import ValidationError
 from api.deps import SettingsDep, WorldDep
 from api.errors import InvalidError, validation_items
 from api.schemas import DETECTION_EXAMPLE, DetectionIn, IngestOut, MessageOut, ValidationErrorOut
+from api.service import WorldService
+from semwm import IngestResult
 
 router = APIRouter(tags=["detections"])
 
@@ -110,14 +112,23 @@ def post_detections(
     applied. A detection older than the latest processed time minus the reorder
     window gives 409.
     """
-    parsed = parse_body(payload, settings.max_batch)
+    result = apply_body(world, payload, settings.max_batch)
+    return IngestOut(applied=result.applied, time=result.time, ignored=result.ignored)
+
+
+def apply_body(world: WorldService, payload: Any, max_batch: int) -> IngestResult:
+    """Check and apply one ``POST /detections`` body (also what the MQTT bridge calls).
+
+    Raises :class:`InvalidError` listing every problem, or the service's
+    :class:`ConflictError`; either way nothing is applied.
+    """
+    parsed = parse_body(payload, max_batch)
     items = [d.to_domain() for d in parsed.valid]
     if parsed.errors:
         # Report the domain problems of the others too, so one answer lists them all.
         more = world.domain_problems(items, parsed.index, parsed.batch)
         raise InvalidError(sorted(parsed.errors + more, key=_loc_order))
-    result = world.ingest(items, parsed.batch)
-    return IngestOut(applied=result.applied, time=result.time, ignored=result.ignored)
+    return world.ingest(items, parsed.batch)
 
 
 def _loc_order(item: dict[str, Any]) -> tuple[int, str]:

@@ -7,6 +7,7 @@ line (or the core) does not import FastAPI.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 from pathlib import Path
 
 from pydantic import ValidationError
@@ -21,7 +22,7 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="run the HTTP service",
         description="Run the semwm HTTP service (OpenAPI at /docs). Every option can also be "
         "set from the environment: SEMWM_KNOWLEDGE, SEMWM_HOST, SEMWM_PORT, "
-        "SEMWM_REORDER_WINDOW, SEMWM_MAX_BATCH, SEMWM_WRITE_BACK.",
+        "SEMWM_REORDER_WINDOW, SEMWM_MAX_BATCH, SEMWM_WRITE_BACK, SEMWM_MQTT, ...",
     )
     parser.add_argument("--knowledge", type=Path, help="knowledge file (YAML or XML)")
     parser.add_argument("--host", help="address to bind (default 127.0.0.1)")
@@ -42,6 +43,7 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="server log level (default: semwm --log-level, else info)",
     )
     add_persistence_options(parser)
+    add_mqtt_options(parser)
     parser.set_defaults(func=run_serve)
     return parser
 
@@ -72,6 +74,22 @@ def add_persistence_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+MQTT_OPTIONS = ("mqtt", "mqtt_prefix", "mqtt_world_rate", "mqtt_client_id")
+
+
+def add_mqtt_options(parser: argparse.ArgumentParser) -> None:
+    """``--mqtt URL``, ``--mqtt-prefix``, ``--mqtt-world-rate``, ``--mqtt-client-id``."""
+    group = parser.add_argument_group("MQTT bridge (pip install 'semwm[mqtt]'; docs/mqtt.md)")
+    group.add_argument("--mqtt", metavar="URL", help="join the broker at mqtt://HOST:PORT")
+    group.add_argument("--mqtt-prefix", metavar="P", help="topic prefix (default semwm)")
+    group.add_argument(
+        "--mqtt-world-rate", type=float, metavar="HZ", help="most world messages/s (default 10)"
+    )
+    group.add_argument(
+        "--mqtt-client-id", metavar="ID", help="persistent session id (semwm-bridge-<prefix>)"
+    )
+
+
 def run_serve(args: argparse.Namespace) -> int:
     """Start uvicorn with the settings from ``args`` over the environment."""
     import uvicorn
@@ -89,6 +107,7 @@ def run_serve(args: argparse.Namespace) -> int:
             "max_batch",
             "write_back",
             *PERSISTENCE_OPTIONS,
+            *MQTT_OPTIONS,
         )
         if getattr(args, key, None) is not None
     }
@@ -103,6 +122,8 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CommandError("no knowledge file: pass --knowledge FILE or set SEMWM_KNOWLEDGE")
     if not settings.knowledge.is_file():
         raise CommandError(f"{settings.knowledge}: no such file")
+    if settings.mqtt is not None and importlib.util.find_spec("paho") is None:
+        raise CommandError('--mqtt needs paho-mqtt: pip install "semwm[mqtt]"')
     log_level = args.serve_log_level or getattr(args, "log_level", None) or "info"
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=log_level)
     return 0
