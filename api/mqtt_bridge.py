@@ -191,7 +191,7 @@ class MqttBridge:
         The largest batch accepted.
     client_id
         The bridge's MQTT client id (its persistent session); default
-        ``semwm-<prefix>`` with ``/`` as ``-``.
+        ``semwm-bridge-<prefix>`` with ``/`` as ``-``.
     """
 
     def __init__(
@@ -211,7 +211,7 @@ class MqttBridge:
         self._stopping = False
         self.link = MqttLink(
             broker,
-            client_id or "semwm-" + topics.prefix.replace("/", "-"),
+            client_id or "semwm-bridge-" + topics.prefix.replace("/", "-"),
             subscriptions=[topics.detections_filter],
             on_message=self._on_message,
             will=(topics.status, encode_json({"online": False})),

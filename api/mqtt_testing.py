@@ -82,7 +82,7 @@ class PrivateBroker:
             f"user {getpass.getuser()}",
             "max_queued_messages 1000000",
             "max_inflight_messages 100",
-            "log_type all",
+            "log_type error",
             "log_type warning",
             "log_type notice",
             f"log_dest file {self.log}",

@@ -44,7 +44,7 @@ class Settings(BaseSettings):
         Join the MQTT broker at ``mqtt://HOST:PORT`` (see docs/mqtt.md): detections
         in on ``<prefix>/detections/<source>``, the world out on ``<prefix>/world`` at
         most ``mqtt_world_rate`` times a second; the client id names the bridge's
-        persistent session (default ``semwm-<prefix>``).
+        persistent session (default ``semwm-bridge-<prefix>``).
     """
 
     model_config = SettingsConfigDict(env_prefix="SEMWM_", frozen=True, extra="ignore")
