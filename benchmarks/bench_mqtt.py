@@ -43,7 +43,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baselines import fmt, machine_info, write_results
+from baselines import RESULTS, add_output_arguments, fmt, machine_info, write_results
 
 from api.mqtt_testing import PrivateBroker, free_port
 from semwm.mqtt.client import MqttLink
@@ -191,8 +191,7 @@ def main() -> None:
         help="longest wait for the service to work off its backlog (s)",
     )  # fmt: skip
     parser.add_argument("--no-restart", action="store_true", help="keep the broker up")
-    parser.add_argument("--update-results", action="store_true",
-                        help="write benchmarks/results/ instead of benchmarks/out/")  # fmt: skip
+    add_output_arguments(parser)
     args = parser.parse_args()
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -205,9 +204,8 @@ def main() -> None:
             service.terminate()
             service.wait(30)
             broker.stop()
-    out = ROOT / "benchmarks" / ("results" if args.update_results else "out")
-    doc = {"machine": machine_info(), "settings": vars(args), "result": result}
-    write_results(out, "mqtt", doc, markdown(doc), quick=False)
+    doc = {"benchmark": "mqtt", "machine": machine_info(), "settings": vars(args), "result": result}
+    write_results(RESULTS, "mqtt", doc, markdown(doc), False, update_results=args.update_results)
 
 
 def run(args: argparse.Namespace, broker: PrivateBroker, pid: int) -> dict[str, Any]:

@@ -239,7 +239,7 @@ class RecentMessages:
     """Digests of the last ``size`` messages: QoS 1 delivers at least once, so a batch a
     robot re-sends after a broker restart must not be applied twice."""
 
-    def __init__(self, size: int = 4096) -> None:
+    def __init__(self, size: int = 65536) -> None:
         if size < 1:
             raise ValueError(f"size must be >= 1; got {size}")
         self.size = size
