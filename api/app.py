@@ -57,13 +57,15 @@ def create_app(settings: Settings) -> FastAPI:
                 write_back=settings.write_back,
             )
             logger.info("world model built from %s", settings.knowledge)
-        bridge = _start_mqtt(app, settings) if settings.mqtt is not None else None
-        try:
-            with attach_persistence(app, settings):
+        with attach_persistence(app, settings):
+            # The bridge starts on the restored model (queued batches apply at once and
+            # are journaled) and stops before the journal closes.
+            bridge = _start_mqtt(app, settings) if settings.mqtt is not None else None
+            try:
                 yield
-        finally:
-            if bridge is not None:
-                bridge.stop()
+            finally:
+                if bridge is not None:
+                    bridge.stop()
 
     app = FastAPI(title="semwm", version="0.1.0", description=DESCRIPTION, lifespan=lifespan)
     app.state.settings = settings

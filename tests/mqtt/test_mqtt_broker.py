@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -162,3 +163,29 @@ def test_world_topic_rate_limit_holds(broker: PrivateBroker, service: RecordingS
         assert bridge.core.counts.world_published == len(worlds)
         robot.link.stop()
         bridge.stop()
+
+
+def test_batches_from_mqtt_are_journaled_with_a_data_dir(
+    broker: PrivateBroker, tmp_path: Path
+) -> None:
+    """With --data-dir the bridge applies to the durable model: a restarted service
+    (without MQTT) restores what came in over MQTT."""
+    topics = Topics("t5")
+    data = tmp_path / "data"
+    settings = Settings(knowledge=KNOWLEDGE, port=0, data_dir=data, sync="batch",
+                        mqtt=broker.url, mqtt_prefix="t5")  # fmt: skip
+    with running_server(settings) as url:
+        robot = Robot(broker.broker, "robot-t5")
+        robot.link.start()
+        for step in range(3):
+            robot.publish(topics.detections("r1"), scan(0.2 * step))
+
+        def world_at_04() -> bool:
+            return bool(httpx.get(f"{url}/world").json()["time"] == 0.4)
+
+        wait_until(world_at_04, "the three batches applied")
+        before = httpx.get(f"{url}/world").json()
+        robot.link.stop()
+    with running_server(Settings(knowledge=KNOWLEDGE, port=0, data_dir=data)) as url:
+        assert httpx.get(f"{url}/world").json() == before
+    assert len(before["objects"]) == 2
