@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
@@ -26,6 +26,9 @@ from api.schemas import DetectionBatch, DetectionIn
 from api.service import WorldService
 from api.settings import Settings
 from semwm.sources import TimeGuard
+
+if TYPE_CHECKING:
+    from api.mqtt_bridge import MqttBridge
 
 logger = logging.getLogger("api")
 
@@ -63,7 +66,14 @@ def create_app(settings: Settings) -> FastAPI:
             )
             logger.info("world model built from %s", settings.knowledge)
         with attach_persistence(app, settings):
-            yield
+            # The bridge starts on the restored model (queued batches apply at once and
+            # are journaled) and stops before the journal closes.
+            bridge = _start_mqtt(app, settings) if settings.mqtt is not None else None
+            try:
+                yield
+            finally:
+                if bridge is not None:
+                    bridge.stop()
 
     app = FastAPI(title="semwm", version="0.1.0", description=DESCRIPTION, lifespan=lifespan)
     app.state.settings = settings
@@ -112,6 +122,14 @@ def _add_guards(app: FastAPI, settings: Settings) -> None:
             expose_headers=["X-Semwm-Commit", "Idempotent-Replayed"],
         )
     app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.hosts())
+
+
+def _start_mqtt(app: FastAPI, settings: Settings) -> MqttBridge:
+    """Join the broker of ``settings.mqtt`` with the app's world service (docs/mqtt.md)."""
+    from api.mqtt_bridge import start_bridge
+
+    service = getattr(app.state, "world", None) or app.dependency_overrides[get_world]()
+    return start_bridge(service, settings)
 
 
 def _add_schemas(schema: dict[str, Any], models: tuple[type[BaseModel], ...]) -> None:

@@ -252,8 +252,7 @@ class WorldService:
             except TimeGuardError as error:
                 raise InvalidError(_time_items(error, batch)) from error
             placed = [
-                d.to_dict() if isinstance(d, Detection) else dict(d)
-                for d in placement.detections
+                d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
             ]
             with self._change():
                 self._check_sources(placed, batch)

@@ -6,8 +6,10 @@ import ipaddress
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, SecretStr, model_validator
+from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from semwm.mqtt.protocol import check_topic_part, parse_broker_url
 
 LOOPBACK_NAMES = ("127.0.0.1", "localhost", "::1", "[::1]")
 MiB = 1024 * 1024
@@ -84,6 +86,11 @@ class Settings(BaseSettings):
         uvicorn: idle keep-alive connections are closed after this many seconds;
         beyond this many connections at once new ones get 503 (slow clients cannot
         hold every worker).
+    mqtt, mqtt_prefix, mqtt_world_rate, mqtt_client_id
+        Join the MQTT broker at ``mqtt://HOST:PORT`` (see docs/mqtt.md): detections
+        in on ``<prefix>/detections/<source>``, the world out on ``<prefix>/world`` at
+        most ``mqtt_world_rate`` times a second; the client id names the bridge's
+        persistent session (default ``semwm-bridge-<prefix>``).
     """
 
     model_config = SettingsConfigDict(env_prefix="SEMWM_", frozen=True, extra="ignore")
@@ -156,3 +163,21 @@ class Settings(BaseSettings):
             "reaches the port could change the world. Pass --token/--token-file (or "
             "SEMWM_TOKEN), or --insecure to do it anyway"
         )
+
+    mqtt: str | None = None
+    mqtt_prefix: str = "semwm"
+    mqtt_world_rate: Annotated[float, Field(gt=0.0)] = 10.0
+    mqtt_client_id: Annotated[str | None, Field(min_length=1)] = None
+
+    @field_validator("mqtt")
+    @classmethod
+    def _broker_url(cls, value: str | None) -> str | None:
+        if value is not None:
+            parse_broker_url(value)
+        return value
+
+    @field_validator("mqtt_prefix")
+    @classmethod
+    def _topic_prefix(cls, value: str) -> str:
+        check_topic_part("prefix", value, allow_slash=True)
+        return value

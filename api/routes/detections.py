@@ -10,7 +10,8 @@ from pydantic import ValidationError
 from api.deps import SettingsDep, WorldDep
 from api.errors import InvalidError, validation_items
 from api.schemas import DETECTION_EXAMPLE, DetectionIn, IngestOut, MessageOut, ValidationErrorOut
-from api.service import COMMIT_HEADER
+from api.service import COMMIT_HEADER, Committed, WorldService
+from semwm import IngestResult
 
 router = APIRouter(tags=["detections"])
 
@@ -138,7 +139,24 @@ def post_detections(
     window gives 409. A repeated ``Idempotency-Key`` header or ``batch_id`` is
     answered as before and applied once.
     """
-    parsed = parse_body(payload, settings.max_batch)
+    committed = apply_body(world, payload, settings.max_batch, idempotency_key)
+    response.headers[COMMIT_HEADER] = str(committed.commit)
+    if committed.replayed:
+        response.headers["Idempotent-Replayed"] = "true"
+    result = committed.value
+    return IngestOut(applied=result.applied, time=result.time, ignored=result.ignored)
+
+
+def apply_body(
+    world: WorldService, payload: Any, max_batch: int, idempotency_key: str | None = None
+) -> Committed[IngestResult]:
+    """Check and apply one ``POST /detections`` body (also what the MQTT bridge calls).
+
+    Raises :class:`InvalidError` listing every problem, or the service's
+    :class:`ConflictError`; either way nothing is applied. A key (the header's, else
+    the body's ``batch_id``) seen recently is answered as before and not applied again.
+    """
+    parsed = parse_body(payload, max_batch)
     items = [d.to_domain() for d in parsed.valid]
     if parsed.errors:
         # Report the domain problems of the others too, so one answer lists them all.
@@ -148,12 +166,7 @@ def post_detections(
         raise InvalidError.one(
             ("body", "batch_id"), "batch_id differs from the Idempotency-Key header"
         )
-    committed = world.ingest(items, parsed.batch, key=idempotency_key or parsed.batch_id)
-    response.headers[COMMIT_HEADER] = str(committed.commit)
-    if committed.replayed:
-        response.headers["Idempotent-Replayed"] = "true"
-    result = committed.value
-    return IngestOut(applied=result.applied, time=result.time, ignored=result.ignored)
+    return world.ingest(items, parsed.batch, key=idempotency_key or parsed.batch_id)
 
 
 def _loc_order(item: dict[str, Any]) -> tuple[int, str]:

@@ -7,6 +7,7 @@ line (or the core) does not import FastAPI.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 from pathlib import Path
 
 from pydantic import ValidationError
@@ -23,7 +24,8 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         "set from the environment: SEMWM_KNOWLEDGE, SEMWM_HOST, SEMWM_PORT, "
         "SEMWM_REORDER_WINDOW, SEMWM_MAX_BATCH, SEMWM_WRITE_BACK, SEMWM_TOKEN, SEMWM_TOKEN_FILE, "
         "SEMWM_READ_TOKEN, SEMWM_INSECURE, SEMWM_CORS_ORIGINS, SEMWM_ALLOWED_HOSTS (JSON lists), "
-        "SEMWM_MAX_BODY, SEMWM_MAX_SOURCES, SEMWM_STUCK_AFTER.",
+        "SEMWM_MAX_BODY, SEMWM_MAX_SOURCES, SEMWM_STUCK_AFTER, SEMWM_MQTT, SEMWM_MQTT_PREFIX, "
+        "SEMWM_MQTT_WORLD_RATE, SEMWM_MQTT_CLIENT_ID.",
     )
     parser.add_argument("--knowledge", type=Path, help="knowledge file (YAML or XML)")
     parser.add_argument("--host", help="address to bind (default 127.0.0.1)")
@@ -45,6 +47,7 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
     )
     add_persistence_options(parser)
     add_safety_options(parser)
+    add_mqtt_options(parser)
     parser.set_defaults(func=run_serve)
     return parser
 
@@ -110,6 +113,22 @@ def add_safety_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--stuck-after", type=float, help="s before /ready says stuck (30)")
 
 
+MQTT_OPTIONS = ("mqtt", "mqtt_prefix", "mqtt_world_rate", "mqtt_client_id")
+
+
+def add_mqtt_options(parser: argparse.ArgumentParser) -> None:
+    """``--mqtt URL``, ``--mqtt-prefix``, ``--mqtt-world-rate``, ``--mqtt-client-id``."""
+    group = parser.add_argument_group("MQTT bridge (pip install 'semwm[mqtt]'; docs/mqtt.md)")
+    group.add_argument("--mqtt", metavar="URL", help="join the broker at mqtt://HOST:PORT")
+    group.add_argument("--mqtt-prefix", metavar="P", help="topic prefix (default semwm)")
+    group.add_argument(
+        "--mqtt-world-rate", type=float, metavar="HZ", help="most world messages/s (default 10)"
+    )
+    group.add_argument(
+        "--mqtt-client-id", metavar="ID", help="persistent session id (semwm-bridge-<prefix>)"
+    )
+
+
 def run_serve(args: argparse.Namespace) -> int:
     """Start uvicorn with the settings from ``args`` over the environment."""
     import uvicorn
@@ -128,6 +147,7 @@ def run_serve(args: argparse.Namespace) -> int:
             "write_back",
             *PERSISTENCE_OPTIONS,
             *SAFETY_OPTIONS,
+            *MQTT_OPTIONS,
         )
         if getattr(args, key, None) is not None
     }
@@ -144,6 +164,8 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CommandError(f"{settings.knowledge}: no such file")
     if (refusal := settings.bind_problem()) is not None:
         raise CommandError(refusal, EXIT_USAGE)
+    if settings.mqtt is not None and importlib.util.find_spec("paho") is None:
+        raise CommandError('--mqtt needs paho-mqtt: pip install "semwm[mqtt]"')
     log_level = args.serve_log_level or getattr(args, "log_level", None) or "info"
     uvicorn.run(create_app(settings), **settings.uvicorn_options(), log_level=log_level)
     return 0
