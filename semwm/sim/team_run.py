@@ -26,7 +26,7 @@ import heapq
 import math
 import time as clock
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -34,7 +34,7 @@ import numpy as np
 from semwm.clock import Exchange
 from semwm.detection import Detection, OutOfOrderError
 from semwm.knowledge.model import Knowledge
-from semwm.sim.metrics import Metrics, compute_metrics
+from semwm.sim.metrics import compute_metrics
 from semwm.sim.runner import RunResult, scans, taxonomy_of, truth_points, world_points
 from semwm.sim.scenarios import Scenario, TruthFrame
 from semwm.sources import SourceRegistry, TimeGuard
@@ -244,13 +244,8 @@ def run_team(
         compatible=taxonomy_of(knowledge).compatible,
     )
     total = cpu_local + cpu_global
-    metrics = Metrics(
-        gospa=metrics.gospa,
-        id_switches=metrics.id_switches,
-        false_objects=metrics.false_objects,
-        missed_objects=metrics.missed_objects,
-        class_accuracy=metrics.class_accuracy,
-        n_frames=metrics.n_frames,
+    metrics = replace(
+        metrics,
         time_per_detection={
             "mean_s": total / max(len(scenario.detections), 1),
             "total_ingest_s": total,

@@ -51,13 +51,9 @@ def published(ref: ReferenceMHF, floor: float) -> list[tuple[int, str]]:
     """(lineage, class) of the objects whose existence over all hypotheses (sum of p times
     existence inside the region) is at least ``floor``, each in the version of the most
     probable hypothesis holding it."""
-    totals: dict[int, float] = {}
-    chosen: dict[int, str] = {}
-    for h in sorted(ref.hypotheses, key=lambda h: -h.p):
-        for o in h.objects:
-            totals[o.lineage] = totals.get(o.lineage, 0.0) + h.p * o.r * ref.inside(o)
-            chosen.setdefault(o.lineage, o.cls)
-    return sorted((lin, chosen[lin]) for lin, total in totals.items() if total >= floor)
+    return sorted(
+        (lin, cls) for lin, (cls, total) in lineage_existence(ref).items() if total >= floor
+    )
 
 
 def _same_objects(a: Hyp, b: Hyp, tol: float) -> bool:
