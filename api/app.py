@@ -14,14 +14,29 @@ from typing import TYPE_CHECKING, Any
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
+from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 from api.deps import get_world
 from api.errors import BugBarrier, install_error_handlers
+from api.feed import WorldFeed
 from api.guard import RequestGuard
+from api.logs import RequestIdMiddleware
+from api.metrics import DetectionMetricsMiddleware, Metrics
+from api.offline_docs import install_offline_docs
 from api.persistence import attach_persistence
-from api.routes import detections, knowledge, local, persistence, sources, system, world
+from api.routes import (
+    detections,
+    knowledge,
+    live,
+    local,
+    metrics,
+    persistence,
+    sources,
+    system,
+    world,
+)
 from api.schemas import DetectionBatch, DetectionIn
 from api.service import WorldService
 from api.settings import Settings
@@ -66,21 +81,40 @@ def create_app(settings: Settings) -> FastAPI:
             )
             logger.info("world model built from %s", settings.knowledge)
         with attach_persistence(app, settings):
-            # The bridge starts on the restored model (queued batches apply at once and
-            # are journaled) and stops before the journal closes.
-            bridge = _start_mqtt(app, settings) if settings.mqtt is not None else None
-            try:
-                yield
-            finally:
-                if bridge is not None:
-                    bridge.stop()
+            async with _live(app, settings, _service(app)):
+                # The bridge starts on the restored model (queued batches apply at once and
+                # are journaled) and stops before the journal closes.
+                bridge = _start_mqtt(app, settings) if settings.mqtt is not None else None
+                try:
+                    yield
+                finally:
+                    if bridge is not None:
+                        bridge.stop()
 
-    app = FastAPI(title="semwm", version="0.1.0", description=DESCRIPTION, lifespan=lifespan)
+    app = FastAPI(
+        title="semwm",
+        version="0.1.0",
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,
+    )
     app.state.settings = settings
+    app.state.feed = None
+    app.state.metrics = Metrics()
+    app.state.metrics.watch(
+        lambda: app.state.feed.service if app.state.feed else None,
+        lambda: app.state.feed.subscriber_count if app.state.feed else 0,
+    )
     install_error_handlers(app)
-    for module in (detections, world, knowledge, system, persistence, sources, local):
+    for module in (detections, world, knowledge, system, persistence, sources, local, live, metrics):
         app.include_router(module.router)
+    install_offline_docs(app)
+    app.mount("/static", StaticFiles(directory=live.STATIC_DIR), name="static")
     _add_guards(app, settings)
+    # Outside the guards: refused requests are counted and get a request id too.
+    app.add_middleware(DetectionMetricsMiddleware, metrics=app.state.metrics)
+    app.add_middleware(RequestIdMiddleware)
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
@@ -130,6 +164,45 @@ def _start_mqtt(app: FastAPI, settings: Settings) -> MqttBridge:
 
     service = getattr(app.state, "world", None) or app.dependency_overrides[get_world]()
     return start_bridge(service, settings)
+
+
+def _service(app: FastAPI) -> WorldService:
+    """The service the routes use: the lifespan's, or a test's override of ``get_world``."""
+    override = app.dependency_overrides.get(get_world)
+    service: WorldService = override() if override is not None else app.state.world
+    return service
+
+
+@asynccontextmanager
+async def _live(app: FastAPI, settings: Settings, service: WorldService) -> AsyncIterator[None]:
+    """Metrics counting, the push feed of ``/world/stream`` and the optional Foxglove bridge."""
+    stop_counting = service.add_listener(app.state.metrics.on_change)
+    feed = WorldFeed(service)
+    await feed.start()
+    app.state.feed = feed
+    bridge = None
+    if settings.foxglove_port is not None:
+        from api.foxglove_bridge import FoxgloveBridge
+
+        bridge = FoxgloveBridge(settings.host, settings.foxglove_port)
+        app.state.foxglove = bridge
+        feed.add_consumer(bridge.publish)
+        logger.info("Foxglove WebSocket on ws://%s:%d", settings.host, bridge.port)
+    try:
+        yield
+    finally:
+        await feed.stop()
+        app.state.feed = None
+        stop_counting()
+        if bridge is not None:
+            bridge.close()
+
+
+def end_streams(app: FastAPI) -> None:
+    """End every open ``/world/stream`` response (before a server shuts down). In the loop."""
+    feed: WorldFeed | None = getattr(app.state, "feed", None)
+    if feed is not None:
+        feed.close_streams()
 
 
 def _add_schemas(schema: dict[str, Any], models: tuple[type[BaseModel], ...]) -> None:

@@ -9,14 +9,15 @@ detection acknowledged before it, none half-applied). Domain errors become
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Generic, Protocol, TypeVar
+from typing import Any, Generic, Literal, Protocol, TypeVar
 
 from api.errors import (
     ApiError,
@@ -36,6 +37,39 @@ from semwm.team import LocalModel
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 
 T = TypeVar("T")
+logger = logging.getLogger("api")
+
+
+@dataclass(frozen=True)
+class WorldChange:
+    """A change applied to the world, as told to the listeners of a :class:`WorldService`.
+
+    Attributes
+    ----------
+    kind
+        ``"detections"`` (a batch was applied), ``"reset"`` or ``"knowledge"`` (a class
+        edit or a reload).
+    detections
+        The applied batch as :meth:`semwm.WorldModel.ingest` took it (``"detections"`` only).
+    applied, ignored
+        Detections used, and accepted but beyond their detector's range.
+    time
+        The world time after the change (s).
+    seconds
+        Wall-clock time the change took under the lock (s).
+    """
+
+    kind: Literal["detections", "reset", "knowledge"]
+    detections: tuple[Mapping[str, Any], ...] = ()
+    applied: int = 0
+    ignored: int = 0
+    time: float | None = None
+    seconds: float = 0.0
+
+
+ChangeListener = Callable[[WorldChange], None]
+"""Called after each committed change, under the service's lock: keep it short (queue, count).
+Unlike a :class:`ChangeHook` it cannot refuse the change; it only hears of it."""
 
 COMMIT_HEADER = "X-Semwm-Commit"
 """The response header numbering accepted changes 1, 2, ... in the order they were applied."""
@@ -151,6 +185,8 @@ class WorldService:
         self._recent: OrderedDict[str, Committed[IngestResult]] = OrderedDict()
         self._summary = self._summarise()
         self.hooks: list[ChangeHook] = []
+        self._listeners: list[ChangeListener] = []
+        self.knowledge_version = 1
         self.sources = SourceRegistry(time_guard)
         self._sources_lock = threading.Lock()  # taken inside self._lock, never around it
         self.clock = clock
@@ -174,6 +210,36 @@ class WorldService:
             for hook in self.hooks:
                 stack.enter_context(hook.applying(record))
             yield
+
+    # -- listeners ----------------------------------------------------------------------------
+
+    def add_listener(self, listener: ChangeListener) -> Callable[[], None]:
+        """Call ``listener`` after every committed change; returns a function removing it.
+
+        Listeners run under the lock, so they see changes in the order they were
+        committed; one that raises is logged and does not undo the change.
+        """
+        with self._lock:
+            self._listeners.append(listener)
+
+        def remove() -> None:
+            with self._lock:
+                if listener in self._listeners:
+                    self._listeners.remove(listener)
+
+        return remove
+
+    def _notify(self, change: WorldChange) -> None:
+        for listener in list(self._listeners):
+            try:
+                listener(change)
+            except Exception:
+                logger.exception("a world change listener failed")
+
+    def _knowledge_replaced(self) -> None:
+        """Count a new knowledge version and tell the listeners (hold the lock)."""
+        self.knowledge_version += 1
+        self._notify(WorldChange("knowledge", time=self._model.latest_time))
 
     @classmethod
     def from_file(
@@ -254,6 +320,7 @@ class WorldService:
             placed = [
                 d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
             ]
+            started = time.perf_counter()
             with self._change():
                 self._check_sources(placed, batch)
                 try:
@@ -277,6 +344,17 @@ class WorldService:
                     raise ConflictError(message + hint) from error
             with self._sources_lock:
                 self.sources.accepted(placement, now)
+            if self._listeners:
+                self._notify(
+                    WorldChange(
+                        "detections",
+                        tuple(placed),
+                        applied=result.applied,
+                        ignored=result.ignored,
+                        time=result.time,
+                        seconds=time.perf_counter() - started,
+                    )
+                )
             committed = Committed(result, self._commit)
             if key is not None and self.idempotency_keys > 0:
                 self._recent[key] = committed
@@ -424,6 +502,19 @@ class WorldService:
             **self._summary,
         }
 
+    def stats(self) -> dict[str, Any]:
+        """Counts for monitoring: objects, stored hypotheses, clusters, knowledge version..."""
+        with self._locked():
+            return {
+                "time": self._model.latest_time,
+                "objects": self._model.object_count,
+                "hypotheses": self._model.hypothesis_count,
+                "hypotheses_log10_joint": self._model.log10_joint_hypotheses,
+                "clusters": self._model.cluster_count,
+                "tracks": self._model.track_count,
+                "knowledge_version": self.knowledge_version,
+            }
+
     def readiness(self) -> list[str]:
         """Why the service cannot take requests now (empty: ready); never waits."""
         reasons = []
@@ -445,6 +536,7 @@ class WorldService:
                 self._locals = {}
                 with self._sources_lock:
                     self.sources.forget_times()
+            self._notify(WorldChange("reset", time=self._model.latest_time))
             return Committed(self._model.latest_time, self._commit)
 
     def digest(self, also: Callable[[], T] | None = None) -> tuple[str, T | None]:
@@ -510,6 +602,7 @@ class WorldService:
                     if self.write_back and self.knowledge_path is not None:
                         self._write_back(new_document, self.knowledge_path)
                         written = True
+            self._knowledge_replaced()
             return Committed((knowledge, written), self._commit)
 
     def _replace_knowledge(self, knowledge: Knowledge, what: str) -> None:
@@ -567,6 +660,7 @@ class WorldService:
         with self._locked():
             with self._change(), self._hooked(knowledge_record(knowledge)):
                 self._replace_knowledge(knowledge, "the reloaded knowledge")
+            self._knowledge_replaced()
             return Committed(knowledge, self._commit)
 
 

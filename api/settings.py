@@ -91,6 +91,10 @@ class Settings(BaseSettings):
         in on ``<prefix>/detections/<source>``, the world out on ``<prefix>/world`` at
         most ``mqtt_world_rate`` times a second; the client id names the bridge's
         persistent session (default ``semwm-bridge-<prefix>``).
+    foxglove_port
+        Also stream the world to Foxglove on this port (``foxglove`` extra); 0 picks one.
+    log_format
+        ``text`` or ``json`` (one JSON object per line), for the service's logs.
     """
 
     model_config = SettingsConfigDict(env_prefix="SEMWM_", frozen=True, extra="ignore")
@@ -181,3 +185,5 @@ class Settings(BaseSettings):
     def _topic_prefix(cls, value: str) -> str:
         check_topic_part("prefix", value, allow_slash=True)
         return value
+    foxglove_port: Annotated[int, Field(ge=0, le=65535)] | None = None
+    log_format: Literal["text", "json"] = "text"

@@ -11,6 +11,7 @@ import uvicorn
 from fastapi import FastAPI
 
 from api.app import create_app
+from api.server import Server
 from api.settings import Settings
 
 
@@ -29,7 +30,7 @@ def running_server(settings: Settings, timeout: float = 20.0) -> Iterator[str]:
 def serving(app: FastAPI, settings: Settings, timeout: float = 20.0) -> Iterator[str]:
     """Serve ``app`` (built from ``settings``, maybe overridden) like :func:`running_server`."""
     config = uvicorn.Config(app, **settings.uvicorn_options(), log_level="warning")
-    server = uvicorn.Server(config)
+    server = Server(config, app)
     thread = threading.Thread(target=server.run, name="semwm-uvicorn", daemon=True)
     thread.start()
     deadline = time.monotonic() + timeout
