@@ -148,7 +148,9 @@ class FoxgloveBridge:
         return port
 
     def publish(self, world: Mapping[str, Any]) -> None:
-        self.channel.log(scene_update(world))
+        """Log ``world`` as a scene update (skipped while no client subscribes)."""
+        if self.channel.has_sinks():
+            self.channel.log(scene_update(world))
 
     def close(self) -> None:
         self.channel.close()

@@ -100,16 +100,23 @@
   }
 
   // -- render ---------------------------------------------------------------------------------
-  function render(now) {
-    svg.replaceChildren();
-    const defs = el("defs", {}, svg);
-    const marker = el("marker", { id: "arrow", viewBox: "0 0 10 10", refX: "9", refY: "5",
-      markerWidth: "7", markerHeight: "7", orient: "auto-start-reverse" }, defs);
-    el("path", { d: "M0,0 L10,5 L0,10 z" }, marker);
+  // Layers, bottom to top. Everything but the detections is redrawn when the world or the
+  // view changes; the detections are redrawn every animation frame while they fade.
+  const defs = el("defs", {}, svg);
+  const marker = el("marker", { id: "arrow", viewBox: "0 0 10 10", refX: "9", refY: "5",
+    markerWidth: "7", markerHeight: "7", orient: "auto-start-reverse" }, defs);
+  el("path", { d: "M0,0 L10,5 L0,10 z" }, marker);
+  const layers = {};
+  for (const name of ["grid", "region", "tracks", "detections", "objects", "scale"]) {
+    layers[name] = el("g", { class: name === "grid" || name === "scale" ? name : "" }, svg);
+  }
+
+  function render() {
+    for (const name of ["grid", "region", "tracks", "objects", "scale"]) layers[name].replaceChildren();
     const { w, h } = size();
 
     // grid, labelled in metres
-    const grid = el("g", { class: "grid" }, svg);
+    const grid = layers.grid;
     const step = gridStep();
     const [wx0, wy1] = toWorld(0, 0), [wx1, wy0] = toWorld(w, h);
     const digits = step < 1 ? Math.ceil(-Math.log10(step)) : 0;
@@ -129,17 +136,17 @@
     if (region) {
       const [x0, y1] = toScreen(region[0][0], region[1][1]);
       const [x1, y0] = toScreen(region[0][1], region[1][0]);
-      el("rect", { x: x0, y: y1, width: x1 - x0, height: y0 - y1, class: "region" }, svg);
+      el("rect", { x: x0, y: y1, width: x1 - x0, height: y0 - y1, class: "region" }, layers.region);
     }
 
     // scale bar
-    const bar = el("g", { class: "scale" }, svg);
+    const bar = layers.scale;
     const barPx = step * state.view.scale;
     el("line", { x1: w - 20 - barPx, y1: h - 22, x2: w - 20, y2: h - 22 }, bar);
     el("text", { x: w - 20 - barPx, y: h - 28 }, bar).textContent = `${step.toFixed(digits)} m`;
 
     // track history
-    const trackLayer = el("g", {}, svg);
+    const trackLayer = layers.tracks;
     for (const [id, points] of state.tracks) {
       const selected = id === state.selected;
       const shown = selected ? points : points.slice(-TRAIL_DRAWN);
@@ -149,7 +156,7 @@
     }
 
     // objects: ellipse, dot, velocity arrow, label
-    const objectLayer = el("g", {}, svg);
+    const objectLayer = layers.objects;
     for (const obj of state.world.objects) {
       const [px, py] = toScreen(obj.position[0], obj.position[1]);
       const g = el("g", { class: obj.id === state.selected ? "object selected" : "object",
@@ -165,17 +172,21 @@
           class: "ellipse", "fill-opacity": (0.05 + 0.2 * alpha).toFixed(3),
         }, g);
       }
-      el("circle", { cx: px, cy: py, r: 6, class: "dot", "fill-opacity": alpha.toFixed(3) }, g);
       if (obj.velocity && Math.hypot(obj.velocity[0], obj.velocity[1]) > 1e-3) {
         const [qx, qy] = toScreen(obj.position[0] + obj.velocity[0], obj.position[1] + obj.velocity[1]);
         el("line", { x1: px, y1: py, x2: qx, y2: qy, class: "velocity", "marker-end": "url(#arrow)" }, g);
       }
+      el("circle", { cx: px, cy: py, r: 5, class: "dot", "fill-opacity": alpha.toFixed(3) }, g);
       el("text", { x: px + 9, y: py - 9 }, g).textContent = objectTitle(obj);
       el("title", {}, g).textContent = `${objectTitle(obj)}\nexistence ${fmt(obj.existence)}`;
     }
 
-    // detections, fading out
-    const detectionLayer = el("g", {}, svg);
+  }
+
+  // detections, fading out
+  function renderDetections(now) {
+    const detectionLayer = layers.detections;
+    detectionLayer.replaceChildren();
     state.detections = state.detections.filter((d) => now - d.received < DETECTION_FADE_MS);
     for (const d of state.detections) {
       const [px, py] = toScreen(d.x, d.y);
@@ -186,10 +197,13 @@
   }
 
   function frame(now) {
-    if (state.dirty || state.detections.length) {
-      state.dirty = false;
-      render(now);
+    if (state.dirty) {
+      render();
     }
+    if (state.dirty || state.detections.length || layers.detections.childNodes.length) {
+      renderDetections(now);
+    }
+    state.dirty = false;
     requestAnimationFrame(frame);
   }
 
@@ -362,6 +376,7 @@
   window.addEventListener("resize", () => { state.dirty = true; });
 
   window.semwmLive = state; // for programs driving the page (tests)
+  window.semwmLivePage = { state, onWorld, onKnowledge, fit };
   connect();
   requestAnimationFrame(frame);
 })();
