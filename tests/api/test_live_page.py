@@ -115,7 +115,7 @@ def test_the_page_shows_the_world_live(
         page.wait_for_selector("#details table")
 
         # Every element of the page, as the DOM has it.
-        assert page.locator(".region").count() == 1
+        assert page.locator("#view .region").count() == 1
         assert page.locator("[data-object-id]").count() == len(world["objects"]) == 3
         assert page.locator(".object ellipse").count() == 3
         assert page.locator(".object .velocity").count() == 1  # only the robot moves
@@ -149,18 +149,24 @@ def test_the_page_shows_the_world_live(
             }"""
         )
         assert any(t.endswith("Cup 87%") for t in page.locator(".object text").all_text_contents())
+        page.click("[data-class=Cup] circle")
+        assert "Cup 87.0%, Can 13.0%" in page.locator("#details").inner_text()
+        assert "0.900 (valid)" in page.locator("#details").inner_text()
+        injected = tmp_path / "live-page-class-probabilities.png"
+        page.screenshot(path=str(injected))
 
         # Pan and zoom change the view, not the world.
-        before = page.eval_on_selector(".region", "r => r.getAttribute('width')")
+        before = page.eval_on_selector("#view .region", "r => r.getAttribute('width')")
         page.mouse.move(500, 400)
         page.mouse.wheel(0, -400)
         page.wait_for_function(
-            f"document.querySelector('.region').getAttribute('width') !== '{before}'"
+            f"document.querySelector('#view .region').getAttribute('width') !== '{before}'"
         )
         page.close()
 
     ARTIFACTS.mkdir(exist_ok=True)
     shutil.copy(screenshot, ARTIFACTS / "live-page.png")
+    shutil.copy(injected, ARTIFACTS / "live-page-class-probabilities.png")
     (ARTIFACTS / "live-page.json").write_text(
         json.dumps({"post_to_object_on_page_s": round(latency, 3)}, indent=1)
     )
