@@ -110,6 +110,7 @@ class WorldFeed:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._wake: asyncio.Event | None = None
         self._task: asyncio.Task[None] | None = None
+        self._running = False
         self._remove_listener: Callable[[], None] | None = None
         self._last_world: dict[str, Any] | None = None
 
@@ -119,6 +120,7 @@ class WorldFeed:
         """Listen to the service and run the snapshot task in the running loop."""
         self._loop = asyncio.get_running_loop()
         self._wake = asyncio.Event()
+        self._running = True
         self._remove_listener = self.service.add_listener(self.on_change)
         self._task = asyncio.create_task(self._run(), name="semwm-world-feed")
 
@@ -128,10 +130,13 @@ class WorldFeed:
             self._remove_listener()
             self._remove_listener = None
         self.close_streams()
-        if self._task is not None:
+        self._running = False
+        if self._task is not None and self._wake is not None:
+            # The flag ends the loop even where Python 3.11's wait_for swallows a
+            # cancellation that races with the wake-up.
+            self._wake.set()
             self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+            await asyncio.wait({self._task}, timeout=self.keepalive + 5.0)
             self._task = None
 
     def close_streams(self) -> None:
@@ -250,7 +255,7 @@ class WorldFeed:
 
     async def _run(self) -> None:
         assert self._wake is not None
-        while True:
+        while self._running:
             try:
                 await asyncio.wait_for(self._wake.wait(), self.keepalive)
             except TimeoutError:

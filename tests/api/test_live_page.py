@@ -148,7 +148,10 @@ def test_the_page_shows_the_world_live(
               window.semwmLivePage.onWorld(w);
             }"""
         )
-        assert any(t.endswith("Cup 87%") for t in page.locator(".object text").all_text_contents())
+        page.wait_for_function(
+            "[...document.querySelectorAll('.object text')]"
+            ".some(t => t.textContent.endsWith('Cup 87%'))"
+        )
         page.click("[data-class=Cup] circle")
         assert "Cup 87.0%, Can 13.0%" in page.locator("#details").inner_text()
         assert "0.900 (valid)" in page.locator("#details").inner_text()
