@@ -10,7 +10,7 @@ The event format is documented in ``docs/api.md`` ("Live stream"):
 
 * ``knowledge``: ``{"version", "source", "dimension", "region", "classes"}``; first,
   and again after every knowledge change.
-* ``world``: ``{"seq", "time", "objects", "hypotheses", "stored_hypotheses",
+* ``world``: ``{"seq", "time", "objects", "hypotheses", "hypotheses_log10_joint",
   "clusters", "knowledge_version", "rate", "detections", "changes"}``; the whole
   world (as ``GET /world``) after each change, at most ``1 / interval`` per second.
 * ``stats``: ``{"rate", "hypotheses", "objects", "time"}`` every ``keepalive``
@@ -232,7 +232,7 @@ class WorldFeed:
         payload.update(
             seq=seq,
             hypotheses=stats["hypotheses"],
-            stored_hypotheses=stats["stored_hypotheses"],
+            hypotheses_log10_joint=stats["hypotheses_log10_joint"],
             clusters=stats["clusters"],
             knowledge_version=stats["knowledge_version"],
             rate=self.rate(),

@@ -9,7 +9,7 @@ Metric names (all prefixed ``semwm_``): ``detections_accepted_total``,
 ``detections_ignored_total``, ``detections_refused_total{reason}``,
 ``ingest_latency_seconds`` (the whole ``POST /detections`` request),
 ``ingest_apply_seconds`` (the world model's part, under the lock), ``objects``,
-``hypotheses``, ``stored_hypotheses``, ``clusters``, ``tracks``,
+``stored_hypotheses``, ``joint_hypotheses_log10``, ``clusters``, ``tracks``,
 ``knowledge_version``, ``world_time_seconds``, ``stream_subscribers``.
 """
 
@@ -76,9 +76,9 @@ class WorldCollector(Collector):
         stats = service.stats()
         gauges: list[tuple[str, str, Any]] = [
             ("objects", "Objects in the most probable hypothesis", stats["objects"]),
-            ("hypotheses", "Global hypotheses (product over clusters)", stats["hypotheses"]),
-            ("stored_hypotheses", "Hypotheses stored (sum over clusters)",
-             stats["stored_hypotheses"]),
+            ("stored_hypotheses", "Hypotheses stored (sum over clusters)", stats["hypotheses"]),
+            ("joint_hypotheses_log10", "log10 of the global hypotheses (combinations of "
+             "the clusters')", stats["hypotheses_log10_joint"]),
             ("clusters", "Independent clusters of objects", stats["clusters"]),
             ("tracks", "Distinct object versions stored", stats["tracks"]),
             ("knowledge_version", "Knowledge version: 1 at start, +1 per edit or reload",

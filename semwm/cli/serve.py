@@ -25,7 +25,9 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         "SEMWM_REORDER_WINDOW, SEMWM_MAX_BATCH, SEMWM_WRITE_BACK, SEMWM_TOKEN, SEMWM_TOKEN_FILE, "
         "SEMWM_READ_TOKEN, SEMWM_INSECURE, SEMWM_CORS_ORIGINS, SEMWM_ALLOWED_HOSTS (JSON lists), "
         "SEMWM_MAX_BODY, SEMWM_MAX_SOURCES, SEMWM_STUCK_AFTER, SEMWM_MQTT, SEMWM_MQTT_PREFIX, "
-        "SEMWM_MQTT_WORLD_RATE, SEMWM_MQTT_CLIENT_ID.",
+        "SEMWM_MQTT_WORLD_RATE, SEMWM_MQTT_CLIENT_ID, SEMWM_FOXGLOVE_PORT, SEMWM_LOG_FORMAT. "
+        "The live world page is at /, its stream at /world/stream, Prometheus metrics at "
+        "/metrics (docs/operations.md).",
     )
     parser.add_argument("--knowledge", type=Path, help="knowledge file (YAML or XML)")
     parser.add_argument("--host", help="address to bind (default 127.0.0.1)")
@@ -44,6 +46,18 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         choices=LOG_LEVELS,
         default=None,
         help="server log level (default: semwm --log-level, else info)",
+    )
+    parser.add_argument(
+        "--log-format",
+        choices=("text", "json"),
+        help="text (default) or json: one JSON object per log line",
+    )
+    parser.add_argument(
+        "--foxglove",
+        type=int,
+        metavar="PORT",
+        dest="foxglove_port",
+        help='also stream the world to Foxglove on this port (pip install "semwm[foxglove]")',
     )
     add_persistence_options(parser)
     add_safety_options(parser)
@@ -134,6 +148,8 @@ def run_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from api.app import create_app
+    from api.logs import logging_config
+    from api.server import Server
     from api.settings import Settings
 
     given = {
@@ -145,6 +161,8 @@ def run_serve(args: argparse.Namespace) -> int:
             "reorder_window",
             "max_batch",
             "write_back",
+            "foxglove_port",
+            "log_format",
             *PERSISTENCE_OPTIONS,
             *SAFETY_OPTIONS,
             *MQTT_OPTIONS,
@@ -166,6 +184,15 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CommandError(refusal, EXIT_USAGE)
     if settings.mqtt is not None and importlib.util.find_spec("paho") is None:
         raise CommandError('--mqtt needs paho-mqtt: pip install "semwm[mqtt]"')
+    if settings.foxglove_port is not None and importlib.util.find_spec("foxglove") is None:
+        raise CommandError('--foxglove needs foxglove-sdk: pip install "semwm[foxglove]"')
     log_level = args.serve_log_level or getattr(args, "log_level", None) or "info"
-    uvicorn.run(create_app(settings), **settings.uvicorn_options(), log_level=log_level)
+    app = create_app(settings)
+    config = uvicorn.Config(
+        app,
+        **settings.uvicorn_options(),
+        log_config=logging_config(settings.log_format, log_level),
+        access_log=False,  # api.logs writes the access log, with request ids
+    )
+    Server(config, app).run()  # ends open /world/stream responses first on shutdown
     return 0

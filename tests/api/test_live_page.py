@@ -49,6 +49,15 @@ def scan(t: float) -> list[dict[str, Any]]:
     ]  # fmt: skip
 
 
+def title(obj: dict[str, Any]) -> str:
+    """What the page writes beside an object: id, class, class probability, label."""
+    text = f"#{obj['id']} {obj['class']}"
+    probabilities = obj.get("class_probabilities")
+    if probabilities and obj["class"] in probabilities:
+        text += f" {100 * probabilities[obj['class']]:.0f}%"
+    return text + (f" · {obj['label']}" if obj["label"] else "")
+
+
 @pytest.fixture
 def browser() -> Iterator[Any]:
     sync_api = pytest.importorskip(
@@ -120,8 +129,8 @@ def test_the_page_shows_the_world_live(
         assert page.locator(".object ellipse").count() == 3
         assert page.locator(".object .velocity").count() == 1  # only the robot moves
         labels = page.locator(".object text").all_text_contents()
-        assert f"#{robot['id']} Robot · r1" in labels
-        assert any(text.endswith(" Cup") for text in labels)
+        assert sorted(labels) == sorted(title(o) for o in world["objects"])
+        assert title(robot).startswith(f"#{robot['id']} Robot") and title(robot).endswith("· r1")
         assert page.locator(".detection").count() > 0  # recent detections, fading
         assert page.locator(".track.selected").count() == 1
         details = page.locator("#details").inner_text()
