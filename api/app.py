@@ -107,7 +107,8 @@ def create_app(settings: Settings) -> FastAPI:
         lambda: app.state.feed.subscriber_count if app.state.feed else 0,
     )
     install_error_handlers(app)
-    for module in (detections, world, knowledge, system, persistence, sources, local, live, metrics):
+    routers = (detections, world, knowledge, system, persistence, sources, local, live, metrics)
+    for module in routers:
         app.include_router(module.router)
     install_offline_docs(app)
     app.mount("/static", StaticFiles(directory=live.STATIC_DIR), name="static")

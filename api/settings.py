@@ -185,5 +185,6 @@ class Settings(BaseSettings):
     def _topic_prefix(cls, value: str) -> str:
         check_topic_part("prefix", value, allow_slash=True)
         return value
+
     foxglove_port: Annotated[int, Field(ge=0, le=65535)] | None = None
     log_format: Literal["text", "json"] = "text"

@@ -45,15 +45,23 @@ def test_metrics_counters_move_with_posted_detections(client: TestClient) -> Non
     bad = [{"time": 1.5, "class": "Mug", "position": [0, 0]}, scene(1.5)[0]]
     assert client.post("/detections", json={"detections": bad}).status_code == 422
     assert client.post("/detections", json=scene(0.0)[0]).status_code == 409
-    assert client.post("/detections", content=b"{not json").status_code == 422
+    headers = {"content-type": "application/json"}
+    assert client.post("/detections", content=b"{not json", headers=headers).status_code == 422
+    assert (
+        client.post(
+            "/detections", content=b"{}", headers={"content-type": "text/plain"}
+        ).status_code
+        == 415
+    )
 
     after = scrape(client)
     assert value(after, "semwm_detections_accepted_total") == 9
     assert value(after, "semwm_detections_refused_total", reason="invalid") == 2 + 1
     assert value(after, "semwm_detections_refused_total", reason="out_of_order") == 1
-    assert value(after, "semwm_ingest_latency_seconds_count") == 3 + 3
+    assert value(after, "semwm_detections_refused_total", reason="unsupported_media_type") == 1
+    assert value(after, "semwm_ingest_latency_seconds_count") == 3 + 4
     assert value(after, "semwm_ingest_apply_seconds_count") == 3
-    assert value(after, "semwm_ingest_latency_seconds_bucket", le="+Inf") == 6
+    assert value(after, "semwm_ingest_latency_seconds_bucket", le="+Inf") == 7
     world = client.get("/world").json()
     health = client.get("/health").json()
     assert value(after, "semwm_objects") == len(world["objects"]) == 3
@@ -112,7 +120,7 @@ def test_a_failing_listener_does_not_undo_the_change(service: WorldService) -> N
         raise RuntimeError("boom")
 
     service.add_listener(broken)
-    assert service.ingest(scene(0.0), batch=True).applied == 3
+    assert service.ingest(scene(0.0), batch=True).value.applied == 3
     assert service.stats()["objects"] == 3
 
 
