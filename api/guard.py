@@ -31,6 +31,8 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 WRITE_METHODS = frozenset({"POST", "PUT", "PATCH", "DELETE"})
 OPEN_PATHS = frozenset({"/health", "/ready", "/docs", "/redoc", "/openapi.json"})
+OPEN_PREFIX = "/static/"
+"""Packaged assets (the docs pages' and the live page's scripts): no data, always open."""
 
 
 def bearer(headers: dict[str, str]) -> str | None:
@@ -151,6 +153,7 @@ class RequestGuard:
             and method != "OPTIONS"
             and self.read_token is not None
             and path not in OPEN_PATHS
+            and not path.startswith(OPEN_PREFIX)
             and not token_matches(given, [t for t in (self.read_token, self.token) if t])
         ):
             why = "a missing" if given is None else "an invalid"

@@ -213,3 +213,15 @@ def test_the_page_and_its_assets_are_served(client: TestClient) -> None:
         response = client.get(f"/{asset}")
         assert response.status_code == 200, asset
         assert "https://" not in response.text
+
+
+def test_docs_assets_stay_open_with_a_read_token(service: WorldService) -> None:
+    from conftest import make_app
+
+    with TestClient(make_app(service, read_token="reader-secret")) as guarded:
+        assert guarded.get("/world").status_code == 401
+        html = guarded.get("/docs").text
+        for asset in re.findall(r'(?:src|href)="([^"]+)"', html):
+            assert guarded.get(asset).status_code == 200, asset
+        assert guarded.get("/static/live.js").status_code == 200
+        assert guarded.get("/metrics").status_code == 401
