@@ -9,7 +9,7 @@ import re
 from typing import Any
 
 import pytest
-from conftest import scene
+from conftest import make_app, scene
 from fastapi.testclient import TestClient
 from prometheus_client.parser import text_string_to_metric_families
 
@@ -216,8 +216,6 @@ def test_the_page_and_its_assets_are_served(client: TestClient) -> None:
 
 
 def test_docs_assets_stay_open_with_a_read_token(service: WorldService) -> None:
-    from conftest import make_app
-
     with TestClient(make_app(service, read_token="reader-secret")) as guarded:
         assert guarded.get("/world").status_code == 401
         html = guarded.get("/docs").text
