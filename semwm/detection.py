@@ -72,11 +72,11 @@ class DetectionError(ValueError):
 class OutOfOrderError(ValueError):
     """A detection older than the reorder window allows; nothing of the batch was applied."""
 
-    def __init__(self, time: float, latest: float, window: float) -> None:
+    def __init__(self, time: float, latest: float, window: float, why: str = "") -> None:
         self.time = time
         self.latest = latest
         self.window = window
         super().__init__(
             f"detection at time {time:g} s is older than the latest processed time {latest:g} s "
-            f"minus the reorder window {window:g} s"
+            f"minus the reorder window {window:g} s" + (f" ({why})" if why else "")
         )

@@ -118,7 +118,15 @@ class WorldModel:
         Detections may arrive up to this many seconds (s) late and are still
         processed in time order (the scans after them are replayed); older ones
         raise :class:`~semwm.detection.OutOfOrderError`.
+
+    The reorder history is also bounded in count (:attr:`max_reorder_scans`): past
+    it the oldest scans are forgotten, and a detection that would have to be
+    replayed before the newest forgotten scan is refused as out of order, so memory
+    stays bounded however fast scans arrive.
     """
+
+    max_reorder_scans = 1000
+    """Most scans kept for replay; each holds a reference to the state before it."""
 
     def __init__(self, knowledge: Knowledge, *, reorder_window: float = 0.0) -> None:
         if reorder_window < 0 or not math.isfinite(reorder_window):
@@ -136,6 +144,7 @@ class WorldModel:
         """Forget every detection and object."""
         self._state = MHFState.empty()
         self._log: list[_LoggedScan] = []
+        self._replay_floor: ScanKey | None = None  # newest scan dropped from a full log
         self._seq = 0
         self._ids: dict[int, int] = {}
         self._next_id = 1
@@ -207,6 +216,7 @@ class WorldModel:
         if gone:
             self._publish()
         self._log = []
+        self._replay_floor = None
 
     # ------------------------------------------------------------------ input
     def validate(self, detections: DetectionInput | Iterable[DetectionInput]) -> list[Measurement]:
@@ -238,17 +248,30 @@ class WorldModel:
             earliest = min(m.time for m in used)
             if earliest < latest - self.reorder_window - 1e-12:
                 raise OutOfOrderError(earliest, latest, self.reorder_window)
-        state, log = self._process(used)
-        self._state, self._log = state, log
+            floor = self._replay_floor
+            if floor is not None and min(_scan_key(m) for m in used) <= floor:
+                raise OutOfOrderError(
+                    earliest,
+                    latest,
+                    latest - floor[0],
+                    why=f"the reorder history holds at most {self.max_reorder_scans} scans",
+                )
+        state, log, floor = self._process(used)
+        self._state, self._log, self._replay_floor = state, log, floor
         self._seq += len(batch)
         if used:
             self._publish()
         return IngestResult(applied=len(used), time=self._state.time, ignored=ignored)
 
-    def _process(self, measurements: Sequence[Measurement]) -> tuple[MHFState, list[_LoggedScan]]:
-        """Process new scans in time order, replaying logged scans they precede."""
+    def _process(
+        self, measurements: Sequence[Measurement]
+    ) -> tuple[MHFState, list[_LoggedScan], ScanKey | None]:
+        """Process new scans in time order, replaying logged scans they precede.
+
+        Returns the new state, the new reorder log and its replay floor (the newest
+        scan dropped to keep the log within :attr:`max_reorder_scans`)."""
         if not measurements:
-            return self._state, self._log
+            return self._state, self._log, self._replay_floor
         scans: dict[ScanKey, list[Measurement]] = {}
         for m in measurements:
             scans.setdefault(_scan_key(m), []).append(m)
@@ -265,7 +288,12 @@ class WorldModel:
         assert state.time is not None
         horizon = state.time - self.reorder_window
         log = [s for s in log if s.key[0] >= horizon] if self.reorder_window > 0 else []
-        return state, log
+        floor = self._replay_floor
+        if len(log) > self.max_reorder_scans:
+            dropped = len(log) - self.max_reorder_scans
+            floor = log[dropped - 1].key
+            log = log[dropped:]
+        return state, log, floor
 
     # ------------------------------------------------------------------ ids
     def _publish(self) -> None:
