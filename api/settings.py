@@ -86,6 +86,10 @@ class Settings(BaseSettings):
         uvicorn: idle keep-alive connections are closed after this many seconds;
         beyond this many connections at once new ones get 503 (slow clients cannot
         hold every worker).
+    timeout_request
+        A connection must send a request's complete headers within this many
+        seconds of opening (or of the previous response), else it is closed: idle
+        or byte-by-byte (slowloris) clients cannot fill ``limit_concurrency``.
     mqtt, mqtt_prefix, mqtt_world_rate, mqtt_client_id
         Join the MQTT broker at ``mqtt://HOST:PORT`` (see docs/mqtt.md): detections
         in on ``<prefix>/detections/<source>``, the world out on ``<prefix>/world`` at
@@ -124,6 +128,7 @@ class Settings(BaseSettings):
     stuck_after: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 30.0
     timeout_keep_alive: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 5.0
     limit_concurrency: Annotated[int, Field(ge=1)] = 256
+    timeout_request: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 10.0
 
     @model_validator(mode="after")
     def _read_token_file(self) -> Settings:
@@ -150,12 +155,15 @@ class Settings(BaseSettings):
 
     def uvicorn_options(self) -> dict[str, Any]:
         """Where uvicorn listens and its limits against slow or too many clients."""
+        from api.protocol import with_header_deadline
+
         return {
             "host": self.host,
             "port": self.port,
             "timeout_keep_alive": self.timeout_keep_alive,
             "limit_concurrency": self.limit_concurrency,
             "h11_max_incomplete_event_size": 64 * 1024,
+            "http": with_header_deadline(self.timeout_request),
         }
 
     def bind_problem(self) -> str | None:

@@ -6,7 +6,7 @@ import json
 from typing import Any
 
 import pytest
-from conftest import MAX_BATCH, locs, snapshot
+from api_helpers import MAX_BATCH, locs, snapshot
 from fastapi.testclient import TestClient
 
 OK = {"time": 3.0, "class": "Cup", "position": [1.0, 2.0], "source": "r1"}

@@ -8,7 +8,7 @@ from typing import Any
 
 import api_knowledge
 import pytest
-from conftest import locs, make_app, snapshot
+from api_helpers import locs, make_app, snapshot
 from fastapi.testclient import TestClient
 
 from api.service import WorldService

@@ -9,7 +9,7 @@ import re
 from typing import Any
 
 import pytest
-from conftest import make_app, scene
+from api_helpers import make_app, scene
 from fastapi.testclient import TestClient
 from prometheus_client.parser import text_string_to_metric_families
 

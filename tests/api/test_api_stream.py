@@ -11,7 +11,7 @@ from typing import Any
 
 import httpx
 import pytest
-from conftest import scene
+from api_helpers import scene
 
 from api.feed import WorldFeed, sse_frame
 from api.service import WorldService

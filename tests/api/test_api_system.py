@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
-from conftest import scene, snapshot
+from api_helpers import scene, snapshot
 from fastapi.testclient import TestClient
 
 from api.app import create_app

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from conftest import locs, snapshot
+from api_helpers import locs, snapshot
 from fastapi.testclient import TestClient
 
 

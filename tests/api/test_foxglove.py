@@ -17,7 +17,7 @@ from typing import Any
 
 import httpx
 import pytest
-from conftest import scene
+from api_helpers import scene
 
 from api.app import create_app
 from api.settings import Settings
