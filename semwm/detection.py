@@ -80,3 +80,36 @@ class OutOfOrderError(ValueError):
             f"detection at time {time:g} s is older than the latest processed time {latest:g} s "
             f"minus the reorder window {window:g} s"
         )
+
+
+class SensorReport(BaseModel):
+    """What a sensor looked at in one scan (paper 004: negative information).
+
+    With it, a scan says where the sensor was and where it pointed, so objects
+    predicted in its view that the scan did not report lose existence and
+    confidence; a scan may then be empty ("I looked and saw nothing").
+
+    Attributes
+    ----------
+    pose
+        ``[x, y, heading]`` (m, m, rad; heading counter-clockwise from the x axis), or
+        ``[x, y, z, heading]`` in a 3D world. The view is the detector's ``range`` and
+        ``field_of_view`` around the heading, in the horizontal plane.
+    time
+        The scan's time (s); default: its detections' time (required for an empty scan).
+    source
+        The scan's source; default: its detections' source.
+    detector
+        Whose ``range`` and ``field_of_view`` make the view; default: the detections'
+        detector, else the knowledge's default.
+    looking_at
+        Ids of objects the robot is looking at (paper 004's flag): treated as in view.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    pose: tuple[Finite, ...]
+    time: Finite | None = None
+    source: str | None = None
+    detector: str | None = None
+    looking_at: tuple[int, ...] = ()
