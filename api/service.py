@@ -47,8 +47,8 @@ class WorldChange:
     Attributes
     ----------
     kind
-        ``"detections"`` (a batch was applied), ``"reset"`` or ``"knowledge"`` (a class
-        edit or a reload).
+        ``"detections"`` (a batch was applied), ``"reset"``, ``"knowledge"`` (a class
+        edit or a reload) or ``"action"`` (a kick, paper 004).
     detections
         The applied batch as :meth:`semwm.WorldModel.ingest` took it (``"detections"`` only).
     applied, ignored
@@ -59,7 +59,7 @@ class WorldChange:
         Wall-clock time the change took under the lock (s).
     """
 
-    kind: Literal["detections", "reset", "knowledge"]
+    kind: Literal["detections", "reset", "knowledge", "action"]
     detections: tuple[Mapping[str, Any], ...] = ()
     applied: int = 0
     ignored: int = 0
@@ -539,6 +539,25 @@ class WorldService:
         if self._failure is not None:
             reasons.append(self._failure)
         return reasons
+
+    def act(self, action: dict[str, Any]) -> Committed[tuple[list[int], int]]:
+        """Apply an action (paper 004: a kick); 422 or 409 and nothing changed on a refusal.
+        Not journaled (``--data-dir``): a restart forgets the branches it made."""
+        with self._locked():
+            with self._change():
+                try:
+                    moved = self._model.act(action)
+                except DetectionError as error:
+                    raise InvalidError(
+                        [
+                            {"loc": ["body", *p.path], "msg": p.message, "type": "action"}
+                            for p in error.problems
+                        ]
+                    ) from error
+                except OutOfOrderError as error:
+                    raise ConflictError(f"{error}; nothing was applied") from error
+            self._notify(WorldChange("action", time=self._model.latest_time))
+            return Committed((moved, self._model.hypothesis_count), self._commit)
 
     def reset(self) -> Committed[float | None]:
         with self._locked():

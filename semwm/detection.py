@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -113,3 +113,36 @@ class SensorReport(BaseModel):
     source: str | None = None
     detector: str | None = None
     looking_at: tuple[int, ...] = ()
+
+
+class ActionReport(BaseModel):
+    """An action a robot took on an object (paper 004 IV-B): a kick.
+
+    Attributes
+    ----------
+    time
+        When (s); not before the latest processed detection.
+    type
+        ``"kick"``.
+    source
+        The robot that acted.
+    object
+        The id of the object acted on; or
+    near
+        a position (m): the nearest passive object within ``radius`` of it.
+    direction
+        The direction it was kicked in (any length but 0).
+    speed
+        The speed the kick gives it (m/s).
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
+
+    time: Finite
+    type: Literal["kick"] = "kick"
+    source: str | None = None
+    object: int | None = None
+    near: tuple[Finite, ...] | None = None
+    radius: Annotated[float, Field(gt=0.0, le=1e6)] = 1.0
+    direction: tuple[Finite, ...]
+    speed: Annotated[float, Field(ge=0.0, le=1e3)]

@@ -31,6 +31,7 @@ from semwm.confidence import (
     view_of,
 )
 from semwm.detection import (
+    ActionReport,
     DetectionError,
     DetectionProblem,
     OutOfOrderError,
@@ -39,6 +40,7 @@ from semwm.detection import (
 from semwm.filters.motion import FloatArray
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
+from semwm.mhf.actions import Kick, apply_kick
 from semwm.mhf.existence import inside_probability
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
@@ -273,6 +275,78 @@ class WorldModel:
         if used or view is not None:
             self._publish()
         return IngestResult(applied=len(used), time=self._state.time, ignored=ignored)
+
+    def act(self, action: ActionReport | Mapping[str, Any]) -> list[int]:
+        """Apply an action (paper 004 IV-B; :mod:`semwm.mhf.actions`): a kick splits every
+        hypothesis holding the object into kicked and not kicked. Returns the ids of the
+        objects it may have moved.
+
+        The reorder window restarts at the action (no replay across it: a detection
+        older than the action then gives :class:`~semwm.detection.OutOfOrderError`).
+
+        Raises
+        ------
+        DetectionError
+            The action is malformed or names no passive object with velocity.
+        OutOfOrderError
+            It is older than the latest processed detection.
+        """
+        try:
+            report = action if isinstance(action, ActionReport) else ActionReport(**action)
+        except ValidationError as error:
+            raise DetectionError(
+                [DetectionProblem(path=tuple(e["loc"]), message=e["msg"]) for e in error.errors()]
+            ) from None
+        dim = self._knowledge.world.dimension
+        problems: list[DetectionProblem] = []
+
+        def problem(name: str, message: str) -> None:
+            problems.append(DetectionProblem(path=(name,), message=message))
+
+        if len(report.direction) != dim or not any(report.direction):
+            problem("direction", f"direction must be {dim} numbers, not all 0")
+        if (report.object is None) == (report.near is None):
+            problem("object", "name the object ('object': id) or a position ('near': [x, y])")
+        if report.near is not None and len(report.near) != dim:
+            problem("near", f"near must have {dim} coordinates")
+        if problems:
+            raise DetectionError(problems)
+        latest = self._state.time
+        if latest is not None and report.time < latest - 1e-12:
+            raise OutOfOrderError(report.time, latest, 0.0)
+        world = self.world(report.time, min_existence=1e-6)
+        if report.object is not None:
+            chosen = [o for o in world.objects if o.id == report.object]
+            where = "object"
+            if not chosen:
+                problem(where, f"no object with id {report.object} in the world")
+        else:
+            assert report.near is not None
+            near = np.asarray(report.near)
+            candidates = [
+                (float(np.linalg.norm(np.asarray(o.position) - near)), o)
+                for o in world.objects
+                if self._knowledge.classes[o.cls].category == "passive"
+            ]
+            close = [c for c in candidates if c[0] <= report.radius]
+            chosen = [min(close, key=lambda c: c[0])[1]] if close else []
+            where = "near"
+            if not chosen:
+                problem(where, f"no passive object within {report.radius:g} m of {report.near}")
+        for obj in chosen:
+            spec = self._knowledge.classes[obj.cls]
+            if spec.category != "passive" or obj.velocity is None:
+                problem(where, f"object {obj.id} ({obj.cls}) is not a passive object with velocity")
+        if problems:
+            raise DetectionError(problems)
+        by_id = {object_id: lineage for lineage, object_id in self._ids.items()}
+        lineages = {by_id.get(o.id, -1 - o.id) for o in chosen}
+        direction = np.asarray(report.direction, dtype=float)
+        kick = Kick(report.time, lineages, direction / np.linalg.norm(direction), report.speed)
+        self._state = apply_kick(self._mhf, self._state, kick)
+        self._log = []
+        self._publish()
+        return [o.id for o in chosen]
 
     def _view(
         self, sensor: SensorReport | Mapping[str, Any], measurements: Sequence[Measurement]

@@ -79,3 +79,40 @@ def test_objects_carry_confidence_and_the_world_filters_by_it(client: TestClient
     ).json()["objects"]
     assert others == []
     assert client.get("/world", params={"confidence": "dubious"}).status_code == 422
+
+
+def test_post_actions_kicks_the_ball_and_detections_resolve_it(client: TestClient) -> None:
+    ball = {
+        "name": "Ball",
+        "category": "passive",
+        "detection_frequency": 10.0,
+        "filter": {
+            "type": "kalman",
+            "model": {"motion_model": "first_order", "system_noise": [[0.05, 0], [0, 0.05]]},
+        },
+        "measurement_noise": [[0.0025, 0], [0, 0.0025]],
+        "initial_velocity_covariance": [[0.01, 0], [0, 0.01]],
+    }
+    assert client.put("/knowledge/classes/Ball", json=ball).status_code in (200, 201)
+    for k in range(6):
+        body = {"time": 0.1 * k, "class": "Ball", "position": [0.0, 0.0], "source": "r1"}
+        assert client.post("/detections", json=body).status_code == 200
+    (obj,) = client.get("/world", params={"class": "Ball"}).json()["objects"]
+    kick = {"time": 0.5, "type": "kick", "source": "r1", "object": obj["id"]}
+    response = client.post("/actions", json={**kick, "direction": [1.0, 0.0], "speed": 2.0})
+    assert response.status_code == 200, response.text
+    assert response.json() == {"objects": [obj["id"]], "hypotheses": 2}
+    alpha = 0.3  # the passive default
+    for k in range(1, 8):
+        tau = 0.1 * k
+        x = 2.0 * tau - alpha * tau**2 / 2
+        body = {"time": 0.5 + tau, "class": "Ball", "position": [x, 0.0], "source": "r1"}
+        assert client.post("/detections", json=body).status_code == 200
+    (moved,) = client.get("/world", params={"class": "Ball"}).json()["objects"]
+    assert moved["id"] == obj["id"]
+    assert abs(moved["velocity"][0] - (2.0 - alpha * 0.7)) < 0.2
+    bad = client.post("/actions", json={**kick, "direction": [1.0], "speed": 1.0})
+    assert bad.status_code == 422
+    assert ["body", "direction"] in [item["loc"] for item in bad.json()["detail"]]
+    late = client.post("/actions", json={**kick, "time": 0.1, "direction": [1, 0], "speed": 1})
+    assert late.status_code == 409
