@@ -185,8 +185,10 @@ def apply_body(
         raise InvalidError.one(
             ("body", "batch_id"), "batch_id differs from the Idempotency-Key header"
         )
-    sensor = parsed.sensor.to_domain() if parsed.sensor is not None else None
-    return world.ingest(items, parsed.batch, key=idempotency_key or parsed.batch_id, sensor=sensor)
+    key = idempotency_key or parsed.batch_id
+    if parsed.sensor is not None:  # paper 004: where the sensor looked
+        return world.ingest(items, parsed.batch, key=key, sensor=parsed.sensor.to_domain())
+    return world.ingest(items, parsed.batch, key=key)
 
 
 def _loc_order(item: dict[str, Any]) -> tuple[int, str]:
