@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Body, Response
 from pydantic import BaseModel, ConfigDict, Field
 
 from api.deps import WorldDep
@@ -12,6 +12,22 @@ from api.schemas import MessageOut, ValidationErrorOut
 from api.service import COMMIT_HEADER
 
 router = APIRouter(tags=["actions"])
+
+_KICK: dict[str, Any] = {
+    "time": 12.3,
+    "type": "kick",
+    "source": "robot1",
+    "near": [1.0, 0.0],
+    "direction": [0.0, 1.0],
+    "speed": 2.0,
+}
+_EXAMPLES: dict[str, Any] = {
+    "near": {"summary": "Kick the ball nearest to a point", "value": _KICK},
+    "object": {
+        "summary": "Kick an object by id",
+        "value": {**{k: v for k, v in _KICK.items() if k != "near"}, "object": 4},
+    },
+}
 
 
 class ActionIn(BaseModel):
@@ -22,18 +38,7 @@ class ActionIn(BaseModel):
 
     model_config = ConfigDict(
         extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {
-                    "time": 12.3,
-                    "type": "kick",
-                    "source": "robot1",
-                    "near": [1.0, 0.0],
-                    "direction": [0.0, 1.0],
-                    "speed": 2.0,
-                }
-            ]
-        },
+        json_schema_extra={"examples": [_KICK]},
     )
 
     time: float = Field(allow_inf_nan=False, description="s; not before the latest detection")
@@ -62,7 +67,11 @@ class ActionOut(BaseModel):
         422: {"model": ValidationErrorOut, "description": "Invalid; nothing was applied"},
     },
 )
-def post_action(world: WorldDep, action: ActionIn, response: Response) -> ActionOut:
+def post_action(
+    world: WorldDep,
+    action: Annotated[ActionIn, Body(openapi_examples=_EXAMPLES)],
+    response: Response,
+) -> ActionOut:
     """Spawn action hypotheses (paper 004 IV-B): kicked with the stated speed and the
     class's spreads, or not kicked."""
     committed = world.act(action.model_dump(exclude_none=True))

@@ -47,3 +47,20 @@ def test_the_command_writes_time_to_see_and_the_plot(tmp_path: Path) -> None:
         assert row["trials"] == 2 and row["mean"] > 0 and row["std"] >= 0
     assert (out / "plot.png").stat().st_size > 10_000
     assert len((out / "trials.jsonl").read_text().splitlines()) == 6
+
+
+def test_robocup_with_a_ball_and_camera_views_runs_with_and_without_negative_information() -> None:
+    from semwm.knowledge.loader import load_document
+    from semwm.sim.robocup_ball import ball_knowledge, make_ball_scenario, run_ball
+
+    document = load_document(shipped_knowledge_path("robocup.yaml"))
+    knowledge = ball_knowledge(document)
+    assert knowledge.detectors["omnivision"].field_of_view == 90.0
+    scenario = make_ball_scenario(np.random.default_rng(0), duration=3.0, n_opponents=1)
+    balls = [p for _, points in scenario.truth for p in points if p.id == "ball"]
+    assert balls[0].position != balls[-1].position  # kicked
+    assert all(key in scenario.poses for key in {(d.time, d.source) for d in scenario.detections})
+    with_views = run_ball(knowledge, scenario, True)
+    without = run_ball(knowledge, scenario, False)
+    assert with_views.n_frames == without.n_frames == len(scenario.truth)
+    assert with_views.gospa.total != without.gospa.total  # the views change the world
