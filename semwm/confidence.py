@@ -6,9 +6,11 @@ Each object (lineage) carries a confidence ``c`` in [0, 1]:
   sets ``c`` to its detector's ``confidence`` (1 for one's own camera, less for a
   teammate's relayed estimate);
 * while it is not seen, ``c`` decays: ``c <- c exp(-lambda dt)`` with the class's
-  ``confidence_decay`` (1/s), or its ``looking_decay`` over the interval ending in a
-  scan whose view held it (or that flagged it ``looking_at``) and that did not
-  report it: negative information, paper 004's active feedback; and by
+  ``confidence_decay`` (1/s), or its ``looking_decay`` over the interval since the
+  same source's previous scan (at most :data:`MAX_LOOK`) when a scan's view held it
+  (or flagged it ``looking_at``) and did not report it: negative information,
+  paper 004's active feedback (each robot's looks count, whoever scans between);
+  and by
   ``exp(-kappa moved)`` (``confidence_decay_distance``, 1/m) when a scan's sensor
   pose shows its observer moved (static landmarks, paper 004 IV-A-3);
 * the class's ``suspicious_confidence`` and ``invalid_confidence`` turn it into a
@@ -59,12 +61,19 @@ def state_of(value: float, spec: ResolvedClass) -> ConfidenceState:
     return "valid"
 
 
+MAX_LOOK = 1.0
+"""s: the longest interval one scan's look counts for (a source silent longer than
+this did not keep looking)."""
+
+
 @dataclass(frozen=True)
 class ConfidenceBook:
-    """Each lineage's confidence at a time, and each source's last sensor position."""
+    """Each lineage's confidence at a time, and each source's last sensor position and
+    last scan time."""
 
     values: Mapping[int, tuple[float, float]] = field(default_factory=dict)
     poses: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    scans: Mapping[str, float] = field(default_factory=dict)
 
     def at(self, lineage: int, time: float, spec: ResolvedClass) -> float:
         """The lineage's confidence carried to ``time`` with no scan in between."""
@@ -113,12 +122,19 @@ def advance(
             }
     moved = 0.0
     poses = dict(book.poses)
-    if view is not None and view.source is not None:
+    scans = dict(book.scans)
+    source = view.source if view is not None else None
+    looked_for: float | None = None  # how long this source's look lasted (s)
+    if view is not None and source is not None:
         here = (float(view.position[0]), float(view.position[1]))
-        before = poses.get(view.source)
+        before = poses.get(source)
         if before is not None:
             moved = math.dist(before, here)
-        poses[view.source] = here
+        poses[source] = here
+        if source in scans:
+            looked_for = min(MAX_LOOK, max(0.0, time - scans[source]))
+    if source is not None:
+        scans[source] = time
     values: dict[int, tuple[float, float]] = {}
     for lineage, track in chosen.items():
         spec = knowledge.classes.get(track.cls)
@@ -129,11 +145,14 @@ def advance(
             values[lineage] = (set_to if track.last_seen >= time else 1.0, time)
             continue
         value, since = entry
-        rate = spec.looking_decay if lineage in looked else spec.confidence_decay
-        value *= math.exp(-rate * max(0.0, time - since))
+        value *= math.exp(-spec.confidence_decay * max(0.0, time - since))
+        if lineage in looked:  # the looking rate instead of the usual one, while it looked
+            look = looked_for if looked_for is not None else max(0.0, time - since)
+            extra = max(0.0, spec.looking_decay - spec.confidence_decay)
+            value *= math.exp(-extra * min(look, MAX_LOOK))
         value *= math.exp(-spec.confidence_decay_distance * moved)
         values[lineage] = (value, time)
-    return ConfidenceBook(values, poses)
+    return ConfidenceBook(values, poses, scans)
 
 
 def view_of(

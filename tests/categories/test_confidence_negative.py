@@ -147,3 +147,15 @@ def test_static_confidence_decays_with_the_observer_motion_not_time() -> None:
     assert by_class(wm, 2.0)["Post"].confidence.value == pytest.approx(1.0)
     wm.ingest([], sensor={**SENSOR, "pose": [2.0, 0.0, math.pi], "time": 1.4})
     assert by_class(wm, 1.4)["Post"].confidence.value == pytest.approx(math.exp(-0.1 * 2.0))
+
+
+def test_each_sources_looks_count_whoever_scans_at_the_same_time() -> None:
+    wm = seen({"in": ("Box", (2.0, 0.5))})
+    away = {**SENSOR, "pose": [0.0, 0.0, math.pi]}
+    facing = {**SENSOR, "source": "other"}
+    for t in (1.2, 1.4):
+        wm.ingest([], sensor={**away, "time": t})  # "me" first, looking away
+        wm.ingest([], sensor={**facing, "time": t})
+    value = by_class(wm, 1.4)["Box"].confidence.value
+    # base decay over 0.4 s; "other" looked for 0.2 s (its first scan has no interval)
+    assert value == pytest.approx(math.exp(-0.5 * 0.4) * math.exp(-(3.0 - 0.5) * 0.2))
