@@ -27,6 +27,7 @@ from api.metrics import DetectionMetricsMiddleware, Metrics
 from api.offline_docs import install_offline_docs
 from api.persistence import attach_persistence
 from api.routes import (
+    actions,
     detections,
     knowledge,
     live,
@@ -107,7 +108,18 @@ def create_app(settings: Settings) -> FastAPI:
         lambda: app.state.feed.subscriber_count if app.state.feed else 0,
     )
     install_error_handlers(app)
-    routers = (detections, world, knowledge, system, persistence, sources, local, live, metrics)
+    routers = (
+        detections,
+        actions,
+        world,
+        knowledge,
+        system,
+        persistence,
+        sources,
+        local,
+        live,
+        metrics,
+    )
     for module in routers:
         app.include_router(module.router)
     install_offline_docs(app)

@@ -8,7 +8,7 @@ covariances in square metres.
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
@@ -95,6 +95,26 @@ class DetectionIn(Body):
         return self.model_dump(by_alias=True, exclude_none=True)
 
 
+class SensorIn(Body):
+    """Where the scan's sensor looked (paper 004: negative information): objects
+    predicted in its view (the detector's range and field_of_view around the pose)
+    that the scan does not report lose existence and confidence. With it a batch may
+    be empty: "I looked and saw nothing"."""
+
+    pose: list[float] = Field(description="[x, y, heading] (m, m, rad), or [x, y, z, heading]")
+    time: float | None = Field(
+        default=None, allow_inf_nan=False, description="s; default: the detections' time"
+    )
+    source: str | None = Field(default=None, description="default: the detections' source")
+    detector: str | None = Field(default=None, description="default: the detections' detector")
+    looking_at: list[int] = Field(
+        default_factory=list, description="ids of objects the robot is looking at"
+    )
+
+    def to_domain(self) -> dict[str, Any]:
+        return self.model_dump(exclude_none=True)
+
+
 class DetectionBatch(Body):
     """Several detections, applied together or not at all."""
 
@@ -111,7 +131,10 @@ class DetectionBatch(Body):
         }
     )
 
-    detections: list[DetectionIn] = Field(min_length=1)
+    detections: list[DetectionIn] = Field(
+        description="At least one, unless 'sensor' says where the sensor looked."
+    )
+    sensor: SensorIn | None = None
 
 
 class IngestOut(BaseModel):
@@ -124,6 +147,13 @@ class IngestOut(BaseModel):
     ignored: int = Field(
         default=0, description="Accepted but not used: beyond their detector's range."
     )
+
+
+class ConfidenceOut(BaseModel):
+    """Paper 004's confidence: a value in [0, 1] and its state by the class's thresholds."""
+
+    value: float
+    state: Literal["valid", "suspicious", "invalid"]
 
 
 class WorldObjectOut(BaseModel):
@@ -149,6 +179,9 @@ class WorldObjectOut(BaseModel):
         default=None,
         description="class -> probability that it is the object's true class (classes below "
         "0.001 left out); 'class' is the most specific class holding more than half",
+    )
+    confidence: ConfidenceOut | None = Field(
+        default=None, description="paper 004's confidence (mht): value and state"
     )
 
 

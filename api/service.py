@@ -47,8 +47,8 @@ class WorldChange:
     Attributes
     ----------
     kind
-        ``"detections"`` (a batch was applied), ``"reset"`` or ``"knowledge"`` (a class
-        edit or a reload).
+        ``"detections"`` (a batch was applied), ``"reset"``, ``"knowledge"`` (a class
+        edit or a reload) or ``"action"`` (a kick, paper 004).
     detections
         The applied batch as :meth:`semwm.WorldModel.ingest` took it (``"detections"`` only).
     applied, ignored
@@ -59,7 +59,7 @@ class WorldChange:
         Wall-clock time the change took under the lock (s).
     """
 
-    kind: Literal["detections", "reset", "knowledge"]
+    kind: Literal["detections", "reset", "knowledge", "action"]
     detections: tuple[Mapping[str, Any], ...] = ()
     applied: int = 0
     ignored: int = 0
@@ -112,6 +112,8 @@ def known_list(names: Sequence[str]) -> str:
 
 def detection_loc(path: Sequence[str | int], batch: bool) -> Loc:
     """The HTTP field path of a :class:`DetectionProblem` path (relative to the batch)."""
+    if path and path[0] == "sensor":
+        return ("body", *path)
     if batch:
         return ("body", "detections", *path)
     rest = tuple(path[1:]) if path and path[0] == 0 else tuple(path)
@@ -299,7 +301,11 @@ class WorldService:
     # -- detections ---------------------------------------------------------------------------
 
     def ingest(
-        self, detections: Sequence[dict[str, Any]], batch: bool, key: str | None = None
+        self,
+        detections: Sequence[dict[str, Any]],
+        batch: bool,
+        key: str | None = None,
+        sensor: dict[str, Any] | None = None,
     ) -> Committed[IngestResult]:
         """Apply ``detections`` whole, or raise :class:`InvalidError`/:class:`ConflictError`.
 
@@ -325,7 +331,7 @@ class WorldService:
                 self._check_sources(placed, batch)
                 try:
                     with self._hooked(batch_record(placed)):
-                        result = self._model.ingest(placed)
+                        result = self._model.ingest(placed, sensor=sensor)
                 except DetectionError as error:
                     raise InvalidError(problems_to_items(error.problems, batch)) from error
                 except OutOfOrderError as error:
@@ -457,6 +463,7 @@ class WorldService:
         near: tuple[float, ...] | None = None,
         label: str | None = None,
         min_existence: float | None = None,
+        confidence: Sequence[str] | None = None,
     ) -> WorldState:
         with self._locked():
             self._check_class(cls)
@@ -469,7 +476,12 @@ class WorldService:
                 )
             try:
                 return self._model.world(
-                    time=time, cls=cls, near=near, label=label, min_existence=min_existence
+                    time=time,
+                    cls=cls,
+                    near=near,
+                    label=label,
+                    min_existence=min_existence,
+                    confidence=confidence,
                 )
             except ValueError as error:
                 raise InvalidError.one(("query",), str(error)) from error
@@ -527,6 +539,25 @@ class WorldService:
         if self._failure is not None:
             reasons.append(self._failure)
         return reasons
+
+    def act(self, action: dict[str, Any]) -> Committed[tuple[list[int], int]]:
+        """Apply an action (paper 004: a kick); 422 or 409 and nothing changed on a refusal.
+        Not journaled (``--data-dir``): a restart forgets the branches it made."""
+        with self._locked():
+            with self._change():
+                try:
+                    moved = self._model.act(action)
+                except DetectionError as error:
+                    raise InvalidError(
+                        [
+                            {"loc": ["body", *p.path], "msg": p.message, "type": "action"}
+                            for p in error.problems
+                        ]
+                    ) from error
+                except OutOfOrderError as error:
+                    raise ConflictError(f"{error}; nothing was applied") from error
+            self._notify(WorldChange("action", time=self._model.latest_time))
+            return Committed((moved, self._model.hypothesis_count), self._commit)
 
     def reset(self) -> Committed[float | None]:
         with self._locked():

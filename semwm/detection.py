@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -80,3 +80,69 @@ class OutOfOrderError(ValueError):
             f"detection at time {time:g} s is older than the latest processed time {latest:g} s "
             f"minus the reorder window {window:g} s" + (f" ({why})" if why else "")
         )
+
+
+class SensorReport(BaseModel):
+    """What a sensor looked at in one scan (paper 004: negative information).
+
+    With it, a scan says where the sensor was and where it pointed, so objects
+    predicted in its view that the scan did not report lose existence and
+    confidence; a scan may then be empty ("I looked and saw nothing").
+
+    Attributes
+    ----------
+    pose
+        ``[x, y, heading]`` (m, m, rad; heading counter-clockwise from the x axis), or
+        ``[x, y, z, heading]`` in a 3D world. The view is the detector's ``range`` and
+        ``field_of_view`` around the heading, in the horizontal plane.
+    time
+        The scan's time (s); default: its detections' time (required for an empty scan).
+    source
+        The scan's source; default: its detections' source.
+    detector
+        Whose ``range`` and ``field_of_view`` make the view; default: the detections'
+        detector, else the knowledge's default.
+    looking_at
+        Ids of objects the robot is looking at (paper 004's flag): treated as in view.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    pose: tuple[Finite, ...]
+    time: Finite | None = None
+    source: str | None = None
+    detector: str | None = None
+    looking_at: tuple[int, ...] = ()
+
+
+class ActionReport(BaseModel):
+    """An action a robot took on an object (paper 004 IV-B): a kick.
+
+    Attributes
+    ----------
+    time
+        When (s); not before the latest processed detection.
+    type
+        ``"kick"``.
+    source
+        The robot that acted.
+    object
+        The id of the object acted on; or
+    near
+        a position (m): the nearest passive object within ``radius`` of it.
+    direction
+        The direction it was kicked in (any length but 0).
+    speed
+        The speed the kick gives it (m/s).
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
+
+    time: Finite
+    type: Literal["kick"] = "kick"
+    source: str | None = None
+    object: int | None = None
+    near: tuple[Finite, ...] | None = None
+    radius: Annotated[float, Field(gt=0.0, le=1e6)] = 1.0
+    direction: tuple[Finite, ...]
+    speed: Annotated[float, Field(ge=0.0, le=1e3)]

@@ -114,7 +114,8 @@ def check(
                 R=R,
                 detector=detector,
                 source=det.source,
-                label=det.label,
+                # paper 004: foreign-controlled objects are tracked from observation only
+                label=det.label if knowledge.classes[det.cls].trust_labels else None,
                 clutter_rate=knowledge.detectors[detector].clutter_frequency,
             )
         )

@@ -14,19 +14,36 @@ changes nothing.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
+from pydantic import ValidationError
 from scipy.optimize import linear_sum_assignment
 
-from semwm.detection import OutOfOrderError
+from semwm.confidence import (
+    CONFIDENCE_STATES,
+    Confidence,
+    ConfidenceBook,
+    advance,
+    state_of,
+    view_of,
+)
+from semwm.detection import (
+    ActionReport,
+    DetectionError,
+    DetectionProblem,
+    OutOfOrderError,
+    SensorReport,
+)
 from semwm.filters.motion import FloatArray
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
+from semwm.mhf.actions import Kick, apply_kick
 from semwm.mhf.existence import inside_probability
 from semwm.mhf.filter import MultipleHypothesisFilter
-from semwm.mhf.measurement import Measurement
+from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted
 from semwm.mhf.state import Cluster, MHFState, Track
 from semwm.validation import DetectionInput, as_batch, check, out_of_range, parse
@@ -65,6 +82,8 @@ class _LoggedScan:
     key: ScanKey
     measurements: tuple[Measurement, ...]
     before: MHFState
+    view: SensorView | None = None
+    book: ConfidenceBook = field(default_factory=ConfidenceBook)
 
 
 @dataclass(frozen=True)
@@ -78,6 +97,14 @@ class _Published:
     @property
     def lineage(self) -> int:
         return self.track.lineage
+
+
+_Floor = tuple[ScanKey, str]
+"""No scan at or before this key may be processed any more, and why."""
+
+
+def _view_key(view: SensorView) -> ScanKey:
+    return (view.time, view.source or "")
 
 
 def _scan_key(m: Measurement) -> ScanKey:
@@ -143,8 +170,9 @@ class WorldModel:
     def reset(self) -> None:
         """Forget every detection and object."""
         self._state = MHFState.empty()
+        self._book = ConfidenceBook()
         self._log: list[_LoggedScan] = []
-        self._replay_floor: ScanKey | None = None  # newest scan dropped from a full log
+        self._replay_floor: _Floor | None = None  # no replay at or before this scan
         self._seq = 0
         self._ids: dict[int, int] = {}
         self._next_id = 1
@@ -215,8 +243,15 @@ class WorldModel:
         self._lost = {i: p for i, p in self._lost.items() if p.track.cls in knowledge.classes}
         if gone:
             self._publish()
+        self._restart_reorder("a knowledge change")
+
+    def _restart_reorder(self, at: str) -> None:
+        """Forget the reorder history: no replay across ``at``, so a scan older than
+        the world's time is refused from now on (it cannot be put before the change)."""
         self._log = []
-        self._replay_floor = None
+        time = self._state.time
+        floor = None if time is None else ((time, ""), f"the reorder window restarts at {at}")
+        self._replay_floor = floor
 
     # ------------------------------------------------------------------ input
     def validate(self, detections: DetectionInput | Iterable[DetectionInput]) -> list[Measurement]:
@@ -224,8 +259,17 @@ class WorldModel:
         parsed = parse(as_batch(detections))
         return check(parsed, self._knowledge, self._mhf.factory, self._seq)
 
-    def ingest(self, detections: DetectionInput | Iterable[DetectionInput]) -> IngestResult:
+    def ingest(
+        self,
+        detections: DetectionInput | Iterable[DetectionInput],
+        sensor: SensorReport | Mapping[str, Any] | None = None,
+    ) -> IngestResult:
         """Apply detections (values or plain dicts), whole or not at all.
+
+        ``sensor`` (:class:`~semwm.detection.SensorReport`) says where the scan's sensor
+        looked: objects predicted in its view that the scan does not report lose
+        existence and confidence (paper 004's negative information). With it the
+        batch may be empty: "I looked and saw nothing".
 
         Raises
         ------
@@ -237,6 +281,7 @@ class WorldModel:
         batch = as_batch(detections)
         parsed = parse(batch)
         measurements = check(parsed, self._knowledge, self._mhf.factory, self._seq)
+        view = self._view(sensor, measurements) if sensor is not None else None
         used = [
             m
             for m, d in zip(measurements, parsed, strict=True)
@@ -244,56 +289,194 @@ class WorldModel:
         ]
         ignored = len(measurements) - len(used)
         latest = self._state.time
-        if used and latest is not None:
-            earliest = min(m.time for m in used)
+        times = [m.time for m in used] + ([view.time] if view is not None else [])
+        if times and latest is not None:
+            earliest = min(times)
             if earliest < latest - self.reorder_window - 1e-12:
                 raise OutOfOrderError(earliest, latest, self.reorder_window)
             floor = self._replay_floor
-            if floor is not None and min(_scan_key(m) for m in used) <= floor:
-                raise OutOfOrderError(
-                    earliest,
-                    latest,
-                    latest - floor[0],
-                    why=f"the reorder history holds at most {self.max_reorder_scans} scans",
-                )
-        state, log, floor = self._process(used)
-        self._state, self._log, self._replay_floor = state, log, floor
+            keys = [_scan_key(m) for m in used] + ([_view_key(view)] if view is not None else [])
+            if floor is not None and min(keys) <= floor[0]:
+                raise OutOfOrderError(earliest, latest, latest - floor[0][0], why=floor[1])
+        state, log, book, floor = self._process(used, view)
+        self._state, self._log, self._book, self._replay_floor = state, log, book, floor
         self._seq += len(batch)
-        if used:
+        if used or view is not None:
             self._publish()
         return IngestResult(applied=len(used), time=self._state.time, ignored=ignored)
 
+    def act(self, action: ActionReport | Mapping[str, Any]) -> list[int]:
+        """Apply an action (paper 004 IV-B; :mod:`semwm.mhf.actions`): a kick splits every
+        hypothesis holding the object into kicked and not kicked. Returns the ids of the
+        objects it may have moved.
+
+        The reorder window restarts at the action (no replay across it: a detection
+        older than the action then gives :class:`~semwm.detection.OutOfOrderError`).
+
+        Raises
+        ------
+        DetectionError
+            The action is malformed or names no passive object with velocity.
+        OutOfOrderError
+            It is older than the latest processed detection.
+        """
+        try:
+            report = action if isinstance(action, ActionReport) else ActionReport(**action)
+        except ValidationError as error:
+            raise DetectionError(
+                [DetectionProblem(path=tuple(e["loc"]), message=e["msg"]) for e in error.errors()]
+            ) from None
+        dim = self._knowledge.world.dimension
+        problems: list[DetectionProblem] = []
+
+        def problem(name: str, message: str) -> None:
+            problems.append(DetectionProblem(path=(name,), message=message))
+
+        if len(report.direction) != dim or not any(report.direction):
+            problem("direction", f"direction must be {dim} numbers, not all 0")
+        if (report.object is None) == (report.near is None):
+            problem("object", "name the object ('object': id) or a position ('near': [x, y])")
+        if report.near is not None and len(report.near) != dim:
+            problem("near", f"near must have {dim} coordinates")
+        if problems:
+            raise DetectionError(problems)
+        latest = self._state.time
+        if latest is not None and report.time < latest - 1e-12:
+            raise OutOfOrderError(report.time, latest, 0.0)
+        world = self.world(report.time, min_existence=1e-6)
+        if report.object is not None:
+            chosen = [o for o in world.objects if o.id == report.object]
+            where = "object"
+            if not chosen:
+                problem(where, f"no object with id {report.object} in the world")
+        else:
+            assert report.near is not None
+            near = np.asarray(report.near)
+            candidates = [
+                (float(np.linalg.norm(np.asarray(o.position) - near)), o)
+                for o in world.objects
+                if self._knowledge.classes[o.cls].category == "passive"
+            ]
+            close = [c for c in candidates if c[0] <= report.radius]
+            chosen = [min(close, key=lambda c: c[0])[1]] if close else []
+            where = "near"
+            if not chosen:
+                problem(where, f"no passive object within {report.radius:g} m of {report.near}")
+        for obj in chosen:
+            spec = self._knowledge.classes[obj.cls]
+            if spec.category != "passive" or obj.velocity is None:
+                problem(where, f"object {obj.id} ({obj.cls}) is not a passive object with velocity")
+        if problems:
+            raise DetectionError(problems)
+        by_id = {object_id: lineage for lineage, object_id in self._ids.items()}
+        lineages = {by_id.get(o.id, -1 - o.id) for o in chosen}
+        direction = np.asarray(report.direction, dtype=float)
+        kick = Kick(report.time, lineages, direction / np.linalg.norm(direction), report.speed)
+        self._state = apply_kick(self._mhf, self._state, kick)
+        self._restart_reorder("an action")
+        self._publish()
+        return [o.id for o in chosen]
+
+    def _view(
+        self, sensor: SensorReport | Mapping[str, Any], measurements: Sequence[Measurement]
+    ) -> SensorView:
+        """The scan's sensor view, checked against the knowledge and the batch."""
+        try:
+            report = sensor if isinstance(sensor, SensorReport) else SensorReport(**sensor)
+        except ValidationError as error:
+            raise DetectionError(
+                [
+                    DetectionProblem(path=("sensor", *e["loc"]), message=e["msg"])
+                    for e in error.errors()
+                ]
+            ) from None
+        problems: list[DetectionProblem] = []
+
+        def problem(field: str, message: str) -> None:
+            problems.append(DetectionProblem(path=("sensor", field), message=message))
+
+        dim = self._knowledge.world.dimension
+        if len(report.pose) != dim + 1:
+            problem("pose", f"pose must be {dim} coordinates and a heading (rad)")
+        times = {m.time for m in measurements}
+        sources = {m.source for m in measurements}
+        if report.time is None and len(times) != 1:
+            problem("time", "an empty scan, or one of several times, needs the sensor's time")
+        elif report.time is not None and times - {report.time}:
+            problem("time", "the sensor's time differs from its detections' time")
+        source = report.source if report.source is not None else next(iter(sources), None)
+        if len(sources) > 1 or (sources and source not in sources):
+            problem("source", "a sensor view belongs to one scan: detections of its source")
+        detector = report.detector or next(
+            (m.detector for m in measurements), self._knowledge.default_detector
+        )
+        if detector not in self._knowledge.detectors:
+            problem("detector", f"unknown detector {detector!r}")
+        by_id = {object_id: lineage for lineage, object_id in self._ids.items()}
+        unknown = [i for i in report.looking_at if i not in by_id]
+        if unknown:
+            problem("looking_at", f"no object with id {unknown[0]} in the world")
+        if problems:
+            raise DetectionError(problems)
+        time = report.time if report.time is not None else next(iter(times))
+        return view_of(
+            report.pose,
+            time,
+            source,
+            detector,
+            self._knowledge,
+            frozenset(by_id[i] for i in report.looking_at),
+        )
+
     def _process(
-        self, measurements: Sequence[Measurement]
-    ) -> tuple[MHFState, list[_LoggedScan], ScanKey | None]:
+        self, measurements: Sequence[Measurement], view: SensorView | None = None
+    ) -> tuple[MHFState, list[_LoggedScan], ConfidenceBook, _Floor | None]:
         """Process new scans in time order, replaying logged scans they precede.
 
-        Returns the new state, the new reorder log and its replay floor (the newest
-        scan dropped to keep the log within :attr:`max_reorder_scans`)."""
-        if not measurements:
-            return self._state, self._log, self._replay_floor
+        Returns the new state, reorder log and confidences, and the log's replay floor
+        (raised past the newest scan dropped to keep it within :attr:`max_reorder_scans`)."""
+        if not measurements and view is None:
+            return self._state, self._log, self._book, self._replay_floor
         scans: dict[ScanKey, list[Measurement]] = {}
+        views: dict[ScanKey, SensorView] = {}
         for m in measurements:
             scans.setdefault(_scan_key(m), []).append(m)
+        if view is not None:
+            key = _view_key(view)
+            scans.setdefault(key, [])
+            views[key] = view
         first = min(scans)
         start = next((i for i, s in enumerate(self._log) if s.key >= first), len(self._log))
-        state = self._log[start].before if start < len(self._log) else self._state
+        if start < len(self._log):
+            state, book = self._log[start].before, self._log[start].book
+        else:
+            state, book = self._state, self._book
         for logged in self._log[start:]:
             scans[logged.key] = [*logged.measurements, *scans.get(logged.key, [])]
+            if logged.view is not None and logged.key not in views:
+                views[logged.key] = logged.view
         log = self._log[:start]
         for key in sorted(scans):
-            before = state
-            state = self._mhf.process_scan(state, scans[key])
-            log.append(_LoggedScan(key, tuple(scans[key]), before))
+            before, before_book = state, book
+            scan_view = views.get(key)
+            state = self._mhf.process_scan(state, scans[key], scan_view)
+            if self._mhf.mht:
+                book = advance(
+                    book, state, scans[key], scan_view, self._knowledge, self._mhf.factory
+                )
+            log.append(_LoggedScan(key, tuple(scans[key]), before, scan_view, before_book))
         assert state.time is not None
         horizon = state.time - self.reorder_window
         log = [s for s in log if s.key[0] >= horizon] if self.reorder_window > 0 else []
         floor = self._replay_floor
         if len(log) > self.max_reorder_scans:
             dropped = len(log) - self.max_reorder_scans
-            floor = log[dropped - 1].key
+            floor = (
+                log[dropped - 1].key,
+                f"the reorder history holds at most {self.max_reorder_scans} scans",
+            )
             log = log[dropped:]
-        return state, log, floor
+        return state, log, book, floor
 
     # ------------------------------------------------------------------ ids
     def _publish(self) -> None:
@@ -554,6 +737,7 @@ class WorldModel:
         near: Sequence[float] | None = None,
         label: str | None = None,
         min_existence: float | None = None,
+        confidence: str | Iterable[str] | None = None,
     ) -> WorldState:
         """The objects of the world, predicted to ``time`` (s).
 
@@ -574,6 +758,9 @@ class WorldModel:
             Only objects carrying this label.
         min_existence
             Only objects at least this likely to exist (``0 < min_existence <= 1``).
+        confidence
+            Only objects in this confidence state (``valid``, ``suspicious``,
+            ``invalid``) or these states (paper 004 Fig. 5; ``mht`` only).
         """
         dim = self._knowledge.world.dimension
         if cls is not None and cls not in self._knowledge.classes:
@@ -584,6 +771,13 @@ class WorldModel:
         if min_existence is not None and not 0.0 < min_existence <= 1.0:
             raise ValueError(f"min_existence must be in (0, 1]; got {min_existence}")
         floor = min_existence if min_existence is not None else self._knowledge.world.min_existence
+        wanted = {confidence} if isinstance(confidence, str) else confidence
+        states = set(wanted) if wanted is not None else None
+        if states is not None and not states <= set(CONFIDENCE_STATES):
+            bad = sorted(states - set(CONFIDENCE_STATES))
+            raise ValueError(
+                f"unknown confidence state {bad[0]!r}; known: {', '.join(CONFIDENCE_STATES)}"
+            )
         state = self._state
         at = time if time is not None else state.time
         if at is None or not math.isfinite(at):
@@ -613,7 +807,12 @@ class WorldModel:
                 and float(np.linalg.norm(position - np.asarray(near[:dim]))) > near[dim]
             ):
                 continue
-            objects.append(self._world_object(track, predicted, i, marginal.existence))
+            obj = self._world_object(track, predicted, i, marginal.existence, at)
+            if states is not None and (
+                obj.confidence is None or obj.confidence.state not in states
+            ):
+                continue
+            objects.append(obj)
         objects.sort(key=lambda o: o.id)
         return WorldState(time=at, objects=tuple(_unique_labels(objects)))
 
@@ -622,7 +821,7 @@ class WorldModel:
         return next((o for o in self.world(time).objects if o.id == object_id), None)
 
     def _world_object(
-        self, track: Track, predicted: Predicted, i: int, existence: float
+        self, track: Track, predicted: Predicted, i: int, existence: float, at: float
     ) -> WorldObject:
         dim = self._knowledge.world.dimension
         mean = predicted.state_mean[i]
@@ -659,7 +858,14 @@ class WorldModel:
                 if self._mhf.mht
                 else None
             ),
+            confidence=self.confidence_of(track, at) if self._mhf.mht else None,
         )
+
+    def confidence_of(self, track: Track, time: float) -> Confidence:
+        """An object's confidence (paper 004) at ``time``: :mod:`semwm.confidence`."""
+        spec = self._knowledge.classes[track.cls]
+        value = self._book.at(track.lineage, time, spec)
+        return Confidence(value, state_of(value, spec))
 
     def hypotheses(self, k: int = 10) -> list[HypothesisSummary]:
         """The ``k`` most probable hypotheses with their probabilities and objects."""

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from semwm.confidence import Confidence
+
 
 @dataclass(frozen=True)
 class WorldObject:
@@ -16,7 +18,8 @@ class WorldObject:
     probability of each class being its true class (``mht`` model; classes below
     0.001 left out), ``cls`` being the most specific class holding half of it. ``id``
     is stable while the object lives; an object below the publishing threshold that a
-    query asked for (``min_existence``) has a provisional negative id.
+    query asked for (``min_existence``) has a provisional negative id. ``confidence``:
+    paper 004's confidence value and state (``mht``; :mod:`semwm.confidence`).
     """
 
     id: int
@@ -30,6 +33,7 @@ class WorldObject:
     created: float
     mode_probabilities: dict[str, float] | None
     class_probabilities: dict[str, float] | None = None
+    confidence: Confidence | None = None
 
     def to_dict(self) -> dict[str, object]:
         data = asdict(self)

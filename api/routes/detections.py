@@ -9,7 +9,14 @@ from pydantic import ValidationError
 
 from api.deps import SettingsDep, WorldDep
 from api.errors import InvalidError, validation_items
-from api.schemas import DETECTION_EXAMPLE, DetectionIn, IngestOut, MessageOut, ValidationErrorOut
+from api.schemas import (
+    DETECTION_EXAMPLE,
+    DetectionIn,
+    IngestOut,
+    MessageOut,
+    SensorIn,
+    ValidationErrorOut,
+)
 from api.service import COMMIT_HEADER, Committed, WorldService
 from semwm import IngestResult
 
@@ -55,6 +62,7 @@ class Parsed:
         self.valid: list[DetectionIn] = []
         self.index: list[int] = []
         self.errors: list[dict[str, Any]] = []
+        self.sensor: SensorIn | None = None
 
     def problem(self, loc: list[str | int], msg: str, type_: str) -> None:
         self.errors.append({"loc": loc, "msg": msg, "type": type_})
@@ -74,10 +82,17 @@ def parse_body(payload: Any, max_batch: int) -> Parsed:
         parsed.add(payload, 0, ("body",))
         return parsed
     parsed = Parsed(batch=True)
-    for key in sorted(set(payload) - {"detections", "batch_id"}):
+    for key in sorted(set(payload) - {"detections", "batch_id", "sensor"}):
         parsed.problem(
-            ["body", key], "unknown field: a batch has only 'detections' and 'batch_id'", "extra"
+            ["body", key],
+            "unknown field: a batch has only 'detections', 'batch_id' and 'sensor'",
+            "extra",
         )
+    if payload.get("sensor") is not None:
+        try:
+            parsed.sensor = SensorIn.model_validate(payload["sensor"])
+        except ValidationError as error:
+            parsed.errors += validation_items(error.errors(), ("body", "sensor"))
     batch_id = payload.get("batch_id")
     if batch_id is not None:
         if isinstance(batch_id, str) and 1 <= len(batch_id) <= MAX_KEY:
@@ -91,8 +106,12 @@ def parse_body(payload: Any, max_batch: int) -> Parsed:
     items = payload["detections"]
     if not isinstance(items, list):
         parsed.problem(["body", "detections"], "must be a list of detections", "list_type")
-    elif not items:
-        parsed.problem(["body", "detections"], "a batch needs at least one detection", "too_short")
+    elif not items and "sensor" not in payload:
+        parsed.problem(
+            ["body", "detections"],
+            "a batch needs at least one detection (or a 'sensor' saying where it looked)",
+            "too_short",
+        )
     elif len(items) > max_batch:
         parsed.problem(
             ["body", "detections"],
@@ -166,7 +185,10 @@ def apply_body(
         raise InvalidError.one(
             ("body", "batch_id"), "batch_id differs from the Idempotency-Key header"
         )
-    return world.ingest(items, parsed.batch, key=idempotency_key or parsed.batch_id)
+    key = idempotency_key or parsed.batch_id
+    if parsed.sensor is not None:  # paper 004: where the sensor looked
+        return world.ingest(items, parsed.batch, key=key, sensor=parsed.sensor.to_domain())
+    return world.ingest(items, parsed.batch, key=key)
 
 
 def _loc_order(item: dict[str, Any]) -> tuple[int, str]:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Path, Query
 
@@ -82,11 +82,25 @@ def get_world(
             "world.min_existence, 0.5).",
         ),
     ] = None,
+    confidence: Annotated[
+        list[Literal["valid", "suspicious", "invalid"]] | None,
+        Query(
+            description="Only objects in this confidence state (paper 004); repeat it for "
+            "several (confidence=valid&confidence=suspicious)."
+        ),
+    ] = None,
 ) -> WorldOut:
     """The objects of the world (each at least ``min_existence`` likely to exist over the
     whole hypothesis set), predicted to ``time``."""
     centre = parse_near(near) if near is not None else None
-    state = world.world(time=time, cls=cls, near=centre, label=label, min_existence=min_existence)
+    state = world.world(
+        time=time,
+        cls=cls,
+        near=centre,
+        label=label,
+        min_existence=min_existence,
+        confidence=confidence,
+    )
     return WorldOut.model_validate(state.to_dict())
 
 

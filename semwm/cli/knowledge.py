@@ -29,7 +29,13 @@ from semwm.knowledge.loader import (
     load_document,
     load_knowledge,
 )
-from semwm.knowledge.model import IMMFilterSpec, Knowledge, Matrix, ResolvedClass
+from semwm.knowledge.model import (
+    CATEGORY_FIELDS,
+    IMMFilterSpec,
+    Knowledge,
+    Matrix,
+    ResolvedClass,
+)
 from semwm.knowledge.problems import KnowledgeError
 from semwm.knowledge.resolve import INHERITED_FIELDS
 
@@ -154,6 +160,15 @@ _UNITS = {
     "max_time_without_update": "s",
 }
 _SHOWN = INHERITED_FIELDS
+_UNITS.update(
+    {
+        "velocity_decay": "m/s^2",
+        "confidence_decay": "1/s",
+        "confidence_decay_distance": "1/m",
+        "looking_decay": "1/s",
+        "kick_direction_spread": "deg",
+    }
+)
 
 
 def _origin(knowledge: Knowledge, resolved: ResolvedClass, field: str) -> str:
@@ -162,7 +177,11 @@ def _origin(knowledge: Knowledge, resolved: ResolvedClass, field: str) -> str:
     for name in (resolved.name, *resolved.ancestors):
         if getattr(specs[name], field) is not None:
             return "" if name == resolved.name else f"  (from {name})"
-    return "  (default: the measurement noise)" if field == "initial_covariance" else "  (default)"
+    if field == "initial_covariance":
+        return "  (default: the measurement noise)"
+    if field in CATEGORY_FIELDS and resolved.category is not None:
+        return f"  (default of category {resolved.category})"
+    return "  (default)"
 
 
 def _value_text(resolved: ResolvedClass, field: str) -> str:

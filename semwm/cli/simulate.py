@@ -100,8 +100,38 @@ def _load(path: Path) -> KnowledgeDocument:
         raise CommandError(f"{path}: {error.strerror or error}", EXIT_INVALID) from None
 
 
+def simulate_kick(args: argparse.Namespace) -> int:
+    """``semwm simulate kick``: paper 004's kick experiment (:mod:`semwm.sim.kick`)."""
+    from semwm.sim.kick import MODELS, PAPER_TABLE_I, run_kick, write_kick
+
+    path = args.knowledge or shipped_knowledge_path("robocup_kick.yaml")
+    try:
+        knowledge = resolve(_load(path), source=str(path))
+    except KnowledgeError as error:
+        raise CommandError(str(error.problems[0]), EXIT_INVALID) from None
+    out = args.out or Path("runs") / f"kick-seed{args.seed}"
+    if out.exists() and not out.is_dir():
+        raise CommandError(f"--out {out}: exists and is not a folder")
+    result = run_kick(knowledge, seed=args.seed, trials=args.trials)
+    write_kick(result, out, str(path))
+    summary = result.summary()
+    print(f"kick (seed {args.seed}, {args.trials} trials), knowledge {path}: wrote {out}")
+    print(f"{'world model':<12}  {'time to see (s)':>16}  {'paper 004 Table I':>18}")
+    for model in MODELS:
+        row = summary[model]
+        mean, std = PAPER_TABLE_I[model]
+        never = f"  ({row['never_seen']} never seen)" if row["never_seen"] else ""
+        print(
+            f"{model:<12}  {row['mean']:>8.2f} ± {row['std']:<5.2f}  {mean:>10.2f} ± {std:<5.2f}"
+            + never
+        )
+    return 0
+
+
 def simulate(args: argparse.Namespace) -> int:
     """Run ``semwm simulate``; returns the exit status."""
+    if args.name == "kick":
+        return simulate_kick(args)
     sizes: dict[str, Any] = {}
     if args.duration is not None:
         if args.name == "sim2":
@@ -144,8 +174,17 @@ def add_simulate_command(subparsers: Subparsers) -> argparse.ArgumentParser:
     parser.add_argument(
         "name",
         metavar="NAME",
-        choices=sorted(SCENARIOS),
-        help="scenario: " + ", ".join(sorted(SCENARIOS)),
+        choices=sorted([*SCENARIOS, "kick"]),
+        help="scenario: "
+        + ", ".join(sorted([*SCENARIOS, "kick"]))
+        + " (kick: paper 004's closed-loop kick experiment)",
+    )
+    parser.add_argument(
+        "--trials",
+        type=int,
+        default=20,
+        metavar="K",
+        help="kick: trials per world model (default 20)",
     )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument(

@@ -11,9 +11,16 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+from numpy.typing import NDArray
 
 from semwm.filters import batched
-from semwm.filters.motion import FloatArray, MotionOrder, process_noises, transition_matrices
+from semwm.filters.motion import (
+    FloatArray,
+    MotionOrder,
+    decay_factors,
+    process_noises,
+    transition_matrices,
+)
 from semwm.knowledge.model import IMMFilterSpec, Knowledge, ResolvedClass
 
 
@@ -44,6 +51,7 @@ class ClassFilter:
     initial_covariance: FloatArray
     stationary_velocity_variance: float = 0.0
     with_velocity: bool = field(default=False)
+    velocity_decay: float = 0.0
 
     @property
     def modes(self) -> int:
@@ -81,6 +89,8 @@ class ClassFilter:
         """Predict each object by its own ``dt`` (s). Objects with ``dt <= 0`` are left as
         they are: no time passes, so no mode transition either."""
         moving = dt > 0.0
+        if self.velocity_decay > 0.0 and self.state_size > self.dim:
+            return self._predict_decaying(x, P, mu, dt, moving)
         if moving.all():
             F, Q = self.models(dt)
             return batched.predict(x, P, mu, F, Q, self.transition)
@@ -90,6 +100,46 @@ class ClassFilter:
             x[moving], P[moving], mu[moving] = batched.predict(
                 x[moving], P[moving], mu[moving], F, Q, self.transition
             )
+        return x, P, mu
+
+    def _predict_decaying(
+        self,
+        x: FloatArray,
+        P: FloatArray,
+        mu: FloatArray,
+        dt: FloatArray,
+        moving: NDArray[np.bool_],
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Prediction of a passive object whose speed decays (:func:`decay_factors`).
+
+        After the IMM mixing, each first-order mode's mean moves by the exact decayed
+        motion (``p + g v``, ``k v``). The covariance is carried by the same linear map
+        evaluated at the speed ``sqrt(|v|^2 + tr P_vv)`` (mean speed and its spread), so
+        that an object at rest with an uncertain velocity still passes that uncertainty
+        on to its position (the map's Jacobian vanishes at ``v = 0``).
+        """
+        x, P, mu = x.copy(), P.copy(), mu.copy()
+        if not moving.any():
+            return x, P, mu
+        d = self.dim
+        xs, Ps, mus, dts = x[moving], P[moving], mu[moving], dt[moving]
+        F, Q = self.models(dts)
+        x0, P0, cbar = batched.imm_mix(xs, Ps, mus, self.transition)
+        F_mean, F_cov = F.copy(), F.copy()
+        eye = np.eye(d)
+        for m, order in enumerate(self.orders):
+            if order != "first_order":
+                continue
+            v = x0[:, m, d:]
+            speed = np.linalg.norm(v, axis=1)
+            spread = np.sqrt(speed**2 + np.trace(P0[:, m, d:, d:], axis1=1, axis2=2))
+            for target, s in ((F_mean, speed), (F_cov, spread)):
+                g, k = decay_factors(s, dts, self.velocity_decay)
+                target[:, m, :d, d:] = g[:, None, None] * eye
+                target[:, m, d:, d:] = k[:, None, None] * eye
+        x[moving] = np.einsum("nmij,nmj->nmi", F_mean, x0)
+        P[moving] = F_cov @ P0 @ np.swapaxes(F_cov, -1, -2) + Q
+        mu[moving] = cbar
         return x, P, mu
 
     def update(
@@ -171,4 +221,5 @@ def build_class_filter(resolved: ResolvedClass, dim: int) -> ClassFilter:
         initial_covariance=P0,
         stationary_velocity_variance=stationary,
         with_velocity=with_velocity,
+        velocity_decay=resolved.velocity_decay if with_velocity else 0.0,
     )

@@ -80,3 +80,32 @@ def process_noises(
         if n > dim:
             Q[:, dim:, dim:] = stationary_velocity_variance * np.eye(dim)
     return Q
+
+
+def decay_factors(speed: FloatArray, dt: FloatArray, alpha: float) -> tuple[FloatArray, FloatArray]:
+    r"""Position gain ``g`` and velocity factor ``k`` of a velocity that decays at ``alpha``.
+
+    Paper 004 IV-B: a passive object's speed decays at a constant rate :math:`\alpha`
+    (m/s^2) along its direction until it stops. Integrated exactly over ``dt`` (so the
+    result does not depend on how the interval is split), with :math:`s = |v|` and
+    :math:`\tau = \min(\Delta t, s / \alpha)` the time it still moves:
+
+    .. math::
+       p' = p + g\, v, \quad g = \tau - \frac{\alpha \tau^2}{2 s}, \qquad
+       v' = k\, v, \quad k = \frac{\max(0, s - \alpha \Delta t)}{s}
+
+    The paper's discrete rule :math:`x \leftarrow x + v \Delta t,\ v \leftarrow
+    \max(0, |v| - \alpha \Delta t)` is its Euler form (equal as :math:`\Delta t \to 0`).
+    ``speed`` and ``dt`` broadcast; ``s = 0`` gives ``g = k = 0`` (it stays put).
+    """
+    speed = np.asarray(speed, dtype=float)
+    dt = np.asarray(dt, dtype=float)
+    if alpha <= 0.0:
+        return np.broadcast_to(dt, np.broadcast(speed, dt).shape).copy(), np.ones(
+            np.broadcast(speed, dt).shape
+        )
+    safe = np.where(speed > 0.0, speed, 1.0)
+    tau = np.minimum(dt, speed / alpha)
+    g = np.where(speed > 0.0, tau - alpha * tau**2 / (2.0 * safe), 0.0)
+    k = np.where(speed > 0.0, np.maximum(0.0, speed - alpha * dt) / safe, 0.0)
+    return g, k

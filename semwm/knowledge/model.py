@@ -47,6 +47,55 @@ Category = Literal["static", "passive", "actively_controlled", "foreign_controll
 """Object categories of paper 004, Section II."""
 
 
+CATEGORY_FIELDS = (
+    "velocity_decay",
+    "confidence_decay",
+    "confidence_decay_distance",
+    "looking_decay",
+    "suspicious_confidence",
+    "invalid_confidence",
+    "detection_probability",
+    "kick_probability",
+    "kick_speed_spread",
+    "kick_direction_spread",
+    "trust_labels",
+)
+"""Class fields whose default depends on the category (paper 004)."""
+
+_COMMON: dict[str, float | bool] = {
+    "velocity_decay": 0.0,
+    "confidence_decay": 0.1,
+    "confidence_decay_distance": 0.0,
+    "looking_decay": 1.0,
+    "suspicious_confidence": 0.5,
+    "invalid_confidence": 0.25,
+    "detection_probability": 0.9,
+    "kick_probability": 0.8,
+    "kick_speed_spread": 0.2,
+    "kick_direction_spread": 10.0,
+    "trust_labels": True,
+}
+CATEGORY_DEFAULTS: Mapping[str | None, Mapping[str, float | bool]] = {
+    None: _COMMON,
+    # landmarks: no velocity; confidence decays with the observer's motion, not time
+    "static": {**_COMMON, "confidence_decay": 0.0, "confidence_decay_distance": 0.1},
+    # a ball: rolls out at alpha = 0.3 m/s^2; looked at and not seen, it soon is invalid
+    "passive": {
+        **_COMMON,
+        "velocity_decay": 0.3,
+        "confidence_decay": 0.25,
+        "looking_decay": 2.0,
+        "suspicious_confidence": 0.6,
+        "invalid_confidence": 0.3,
+    },
+    # teammates report themselves (labels are identities)
+    "actively_controlled": {**_COMMON, "confidence_decay": 0.2},
+    # opponents: observation only (labels on their detections are not identities)
+    "foreign_controlled": {**_COMMON, "confidence_decay": 0.2, "trust_labels": False},
+}
+"""Per-category defaults of :data:`CATEGORY_FIELDS`; a class may set any of them."""
+
+
 class Frozen(BaseModel):
     """Base of every knowledge value: immutable, unknown keys rejected."""
 
@@ -218,7 +267,39 @@ class ClassSpec(Frozen):
         ``mht``: disappearance relations, the mirror of ``appearance`` ("people leave
         through doors"): near a target the object leaves at the relation's rate.
     category
-        Paper 004's object category.
+        Paper 004's object category (Definition 2). It chooses the defaults of the
+        fields below (:data:`CATEGORY_DEFAULTS`); each may be set per class.
+    velocity_decay
+        alpha (m/s^2), filters with velocity: the speed decays as
+        ``|v| <- max(0, |v| - alpha dt)`` along its direction (paper 004 IV-B, a
+        passive ball rolling out); 0 keeps constant velocity.
+    confidence_decay
+        Paper 004 IV: the rate (1/s) at which an unseen object's confidence decays,
+        ``c <- c exp(-rate dt)``.
+    confidence_decay_distance
+        The rate (1/m) at which it decays with the observer's motion (static
+        landmarks in paper 004 IV-A-3), when scans carry the sensor pose.
+    looking_decay
+        The rate (1/s) that replaces ``confidence_decay`` while a scan looks at the
+        object (it is in the scan's field of view, or flagged ``looking_at``) and
+        does not report it: negative information (paper 004, Fig. 6).
+    suspicious_confidence, invalid_confidence
+        l_suspicious and l_invalid: confidence below the first is ``suspicious``,
+        below the second ``invalid`` (paper 004 Fig. 5).
+    detection_probability
+        P_D: the probability that a scan whose field of view holds the object
+        reports it (state-dependent: 0 outside the view).
+    kick_probability
+        Prior probability that a reported kick moved the object (``POST /actions``);
+        1 - it is the "not kicked" hypothesis.
+    kick_speed_spread, kick_direction_spread
+        Relative standard deviation of a kick's stated speed (fraction) and standard
+        deviation of its direction (degrees).
+    trust_labels
+        Whether a detection's label is the object's identity (paper 000 III-B).
+        ``actively_controlled`` objects report themselves under their label;
+        ``foreign_controlled`` ones are tracked from observation only: labels on
+        their detections are dropped.
     """
 
     name: str
@@ -235,6 +316,17 @@ class ClassSpec(Frozen):
     leave_frequency: Rate | None = None
     disappearance: tuple[AppearanceRelation, ...] | None = None
     category: Category | None = None
+    velocity_decay: NonNegative | None = None
+    confidence_decay: NonNegative | None = None
+    confidence_decay_distance: NonNegative | None = None
+    looking_decay: NonNegative | None = None
+    suspicious_confidence: Probability | None = None
+    invalid_confidence: Probability | None = None
+    detection_probability: Probability | None = None
+    kick_probability: Probability | None = None
+    kick_speed_spread: NonNegative | None = None
+    kick_direction_spread: Annotated[float, Field(ge=0.0, le=180.0)] | None = None
+    trust_labels: bool | None = None
 
 
 class DetectorSpec(Frozen):
@@ -257,6 +349,9 @@ class DetectorSpec(Frozen):
         class confusable with the true one (a sibling, or a subclass of a generic
         object). Compatible reports (the class or a superclass) count 1, classes
         with no common ancestor 0 (paper 002 eq. 8 is the limit confusion_rate = 0).
+    confidence
+        Paper 004: the confidence a detection of this detector gives the object it
+        updates (a teammate's relayed estimate: lower than one's own camera).
     """
 
     name: str
@@ -266,6 +361,7 @@ class DetectorSpec(Frozen):
     field_of_view: Annotated[float, Field(gt=0.0, le=360.0)] | None = None
     confusion_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.05
     unrelated_confusion_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.01
+    confidence: Probability = 1.0
 
 
 class KnownObject(Frozen):
@@ -306,6 +402,17 @@ class ResolvedClass(Frozen):
     leave_frequency: float
     disappearance: tuple[AppearanceRelation, ...]
     category: Category | None
+    velocity_decay: float = 0.0
+    confidence_decay: float = 0.1
+    confidence_decay_distance: float = 0.0
+    looking_decay: float = 1.0
+    suspicious_confidence: float = 0.5
+    invalid_confidence: float = 0.25
+    detection_probability: float = 0.9
+    kick_probability: float = 0.8
+    kick_speed_spread: float = 0.2
+    kick_direction_spread: float = 10.0
+    trust_labels: bool = True
 
 
 class Knowledge(Frozen):

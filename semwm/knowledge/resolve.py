@@ -14,6 +14,8 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 
 from semwm.knowledge.model import (
+    CATEGORY_DEFAULTS,
+    CATEGORY_FIELDS,
     ClassSpec,
     DetectorSpec,
     IMMFilterSpec,
@@ -37,6 +39,7 @@ INHERITED_FIELDS = (  # what a class takes from its is-a parents when it leaves 
     "leave_frequency",
     "disappearance",
     "category",
+    *CATEGORY_FIELDS,
 )
 _REQUIRED = ("detection_frequency", "filter", "measurement_noise")
 DEFAULT_NEW_FREQUENCY = 0.1
@@ -293,7 +296,39 @@ def _resolve(
             ),
             disappearance=values["disappearance"] or (),
             category=values["category"],
+            **{
+                field: (
+                    values[field]
+                    if values[field] is not None
+                    else CATEGORY_DEFAULTS[values["category"]][field]
+                )
+                for field in CATEGORY_FIELDS
+            },
         )
+
+    for i, spec in enumerate(specs):
+        done = resolved.get(spec.name)
+        if done is None:
+            continue
+        if done.invalid_confidence > done.suspicious_confidence:
+            problems.append(
+                Problem(
+                    f"class {spec.name!r}: invalid_confidence ({done.invalid_confidence:g}) must "
+                    f"not exceed suspicious_confidence ({done.suspicious_confidence:g})",
+                    ("classes", i),
+                )
+            )
+        has_velocity = isinstance(done.filter, IMMFilterSpec) or (
+            done.filter.model.motion_model == "first_order"
+        )
+        if done.category == "static" and has_velocity:
+            problems.append(
+                Problem(
+                    f"class {spec.name!r} is static (paper 004: no velocity) but its filter "
+                    "has velocity; use a zeroth_order Kalman filter or another category",
+                    ("classes", i),
+                )
+            )
 
     detector_names = [d.name for d in document.detectors]
     for i, detector in enumerate(document.detectors):

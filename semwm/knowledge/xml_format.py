@@ -93,6 +93,17 @@ _CLASS_SCALARS = (
     "max_time_without_update",
     "leave_frequency",
     "category",
+    "velocity_decay",
+    "confidence_decay",
+    "confidence_decay_distance",
+    "looking_decay",
+    "suspicious_confidence",
+    "invalid_confidence",
+    "detection_probability",
+    "kick_probability",
+    "kick_speed_spread",
+    "kick_direction_spread",
+    "trust_labels",
 )
 _CLASS_MATRICES = ("measurement_noise", "initial_covariance", "initial_velocity_covariance")
 _OBJECT_CHILDREN = (
@@ -119,6 +130,7 @@ _DETECTOR_ATTRIBUTES = (
     "field_of_view",
     "confusion_rate",
     "unrelated_confusion_rate",
+    "confidence",
 )
 _KNOWN_OBJECT_ATTRIBUTES = ("class", "name")
 _SEPARATORS = re.compile(r"[\s,]+")
@@ -332,7 +344,7 @@ class _Reader:
                 child = parts[tag][0]
                 self.record((*path, tag), self.line(child))
                 text = self.text(child)
-                spec[tag] = text if tag == "category" else _number_or_text(text)
+                spec[tag] = text if tag in ("category", "trust_labels") else _number_or_text(text)
         for tag in _CLASS_MATRICES:
             if tag in parts:
                 spec[tag] = self.matrix(parts[tag][0], (*path, tag))
@@ -633,7 +645,9 @@ def _write_class(root: etree._Element, spec: ClassSpec) -> None:
         _add(element, "is_a", parent)
     for name in _CLASS_SCALARS:
         value = getattr(spec, name)
-        if value is not None:
+        if isinstance(value, bool):
+            _add(element, name, "true" if value else "false")
+        elif value is not None:
             _add(element, name, value if isinstance(value, str) else _format_number(value))
     for kind in ("appearance", "disappearance"):
         relations = getattr(spec, kind)

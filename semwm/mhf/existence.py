@@ -28,12 +28,18 @@ nothing confirms are removed, with no competitor needed.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.special import ndtr
 
 from semwm.filters.motion import FloatArray
+from semwm.mhf.measurement import SensorView
+
+if TYPE_CHECKING:
+    from semwm.knowledge.model import Knowledge
+    from semwm.mhf.predict import Predicted
 
 Region = tuple[tuple[float, float], ...]
 
@@ -103,3 +109,87 @@ def near_rate(
 
 def log_or_minus_inf(value: float) -> float:
     return math.log(value) if value > 0.0 else -math.inf
+
+
+# 7 x 7 Gauss-Hermite rule (probabilists'): points and weights for a standard normal
+_GH_X, _GH_W = np.polynomial.hermite_e.hermegauss(7)
+_GH_W = _GH_W / _GH_W.sum()
+_GRID = np.stack(np.meshgrid(_GH_X, _GH_X, indexing="ij"), axis=-1).reshape(-1, 2)
+_GRID_W = np.outer(_GH_W, _GH_W).reshape(-1)
+
+
+def in_view_probability(
+    position: FloatArray, covariance: FloatArray, view: SensorView
+) -> FloatArray:
+    """Probability that each object lies in the sensor's view (a disc sector of radius
+    ``range`` and opening ``2 half_angle`` around ``heading``), from its Gaussian
+    position estimate's horizontal marginal, by a 7 x 7 Gauss-Hermite rule.
+
+    ``position`` ``(N, d)``, ``covariance`` ``(N, d, d)``; returns ``(N,)``.
+    """
+    count = position.shape[0]
+    if count == 0:
+        return np.ones(0)
+    mean = position[:, :2]
+    cov = covariance[:, :2, :2] + 1e-12 * np.eye(2)
+    L = np.linalg.cholesky(cov)  # (N, 2, 2)
+    points = mean[:, None, :] + np.einsum("nij,kj->nki", L, _GRID)  # (N, K, 2)
+    offset = points - view.position[None, None, :2]
+    inside = np.ones(offset.shape[:2], dtype=bool)
+    if view.range is not None:
+        inside &= np.linalg.norm(offset, axis=-1) <= view.range
+    if view.half_angle is not None:
+        bearing = np.arctan2(offset[..., 1], offset[..., 0]) - view.heading
+        bearing = (bearing + np.pi) % (2.0 * np.pi) - np.pi
+        inside &= np.abs(bearing) <= view.half_angle
+    result: FloatArray = inside.astype(float) @ _GRID_W
+    return result
+
+
+def missed(r: FloatArray, p_detect: FloatArray) -> tuple[FloatArray, FloatArray]:
+    r"""Existence after a scan that could have reported each object (with probability
+    ``p_detect``: P_D times the probability that it is in the view) and did not, and
+    ``log q``; the missed-detection update of a Bernoulli track (PMBM):
+
+    .. math:: q = 1 - r\,p, \qquad r' = \frac{r (1 - p)}{q}
+
+    ``p = 0`` (outside the view) leaves ``r`` unchanged and ``q = 1``.
+    """
+    q = np.maximum(1.0 - r * p_detect, 1e-300)
+    return np.clip(r * (1.0 - p_detect) / q, 0.0, 1.0), np.log(q)
+
+
+def looked_at(
+    view: SensorView,
+    predicted: Predicted,
+    seen: Collection[int],
+    existence: Mapping[int, float],
+    knowledge: Knowledge,
+) -> tuple[dict[int, float], dict[int, float]]:
+    """Negative information of one scan: the existence of every predicted version after
+    the scan did not report it, and the log missed-detection likelihood of each.
+
+    The detection probability is state-dependent: ``P_D(class) * P(in view)``
+    (:func:`in_view_probability`; 1 for objects flagged ``looking_at``), so an object
+    outside the view is unchanged. Versions in ``seen`` (a detection of this scan fell
+    in their gate) are left to the association: one of its children explains them.
+    """
+    tracks = predicted.tracks
+    if not tracks:
+        return {}, {}
+    inside = in_view_probability(predicted.position, predicted.position_covariance, view)
+    p = np.array(
+        [
+            0.0
+            if t.key in seen
+            else knowledge.classes[t.cls].detection_probability
+            * (1.0 if t.lineage in view.looking_at else float(inside[i]))
+            for i, t in enumerate(tracks)
+        ]
+    )
+    r = np.array([existence.get(t.key, 1.0) for t in tracks])
+    r_new, log_q = missed(r, p)
+    keys = [t.key for t in tracks]
+    return dict(zip(keys, r_new.tolist(), strict=True)), dict(
+        zip(keys, log_q.tolist(), strict=True)
+    )

@@ -33,8 +33,8 @@ from semwm.filters.factory import FilterFactory
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf.association import Associator, DetectionOptions
-from semwm.mhf.existence import inside_probability, near_rate, survive
-from semwm.mhf.measurement import Measurement
+from semwm.mhf.existence import inside_probability, looked_at, near_rate, survive
+from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted, predict_tracks
 from semwm.mhf.prune import merge, prune
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
@@ -206,11 +206,18 @@ class MultipleHypothesisFilter:
                 gone.add(track.key)
         return gone
 
-    def process_scan(self, state: MHFState, measurements: Sequence[Measurement]) -> MHFState:
-        """Process one scan: detections sharing a source and a time."""
-        if not measurements:
+    def process_scan(
+        self,
+        state: MHFState,
+        measurements: Sequence[Measurement],
+        view: SensorView | None = None,
+    ) -> MHFState:
+        """Process one scan: detections sharing a source and a time. With ``view`` (where
+        the sensor looked) the scan may be empty, and objects in view that it does not
+        report lose existence (:func:`semwm.mhf.existence.looked_at`)."""
+        if not measurements and view is None:
             return state
-        time = measurements[0].time
+        time = measurements[0].time if measurements else view.time  # type: ignore[union-attr]
         keys = list(state.tracks)
         predicted = self.predict(state, keys, time)
         existence, log_q = self.existence_at(state, predicted, time)
@@ -230,6 +237,11 @@ class MultipleHypothesisFilter:
             table.new_key,
             [existence[t.key] for t in predicted.tracks],
         )
+        if view is not None and self.mht:
+            seen = {k for option in options for k in option.existing}
+            r_view, log_q_view = looked_at(view, predicted, seen, table.existence, self.knowledge)
+            table.existence.update(r_view)
+            clusters = self.undetected(clusters, log_q_view, table.tracks)
         book = _ClusterBook(clusters)
         for option in options:
             if not self.mht:

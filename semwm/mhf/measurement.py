@@ -24,3 +24,22 @@ class Measurement:
     source: str | None
     label: str | None
     clutter_rate: float
+
+
+@dataclass(frozen=True, slots=True)
+class SensorView:
+    """Where a scan's sensor looked (paper 004: negative information).
+
+    ``position`` ``(2,)`` (m) and ``heading`` (rad) in the horizontal plane;
+    ``range`` (m) and ``half_angle`` (rad) bound the view (``None``: unbounded);
+    ``looking_at``: lineages of objects flagged as looked at (in view whatever their
+    position).
+    """
+
+    time: float
+    source: str | None
+    position: FloatArray
+    heading: float
+    range: float | None
+    half_angle: float | None
+    looking_at: frozenset[int] = frozenset()

@@ -75,6 +75,13 @@ classes = st.builds(
     category=optional(
         st.sampled_from(["static", "passive", "actively_controlled", "foreign_controlled"])
     ),
+    velocity_decay=optional(non_negative),
+    confidence_decay=optional(non_negative),
+    looking_decay=optional(non_negative),
+    suspicious_confidence=optional(st.floats(min_value=0.0, max_value=1.0)),
+    detection_probability=optional(st.floats(min_value=0.0, max_value=1.0)),
+    kick_direction_spread=optional(st.floats(min_value=0.0, max_value=180.0)),
+    trust_labels=optional(st.booleans()),
 )
 worlds = st.builds(
     WorldSettings,
