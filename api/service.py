@@ -31,7 +31,13 @@ from semwm import IngestResult, WorldModel, load_knowledge
 from semwm.clock import Exchange
 from semwm.detection import Detection, DetectionError, DetectionProblem, OutOfOrderError
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
-from semwm.persistence.records import Record, batch_record, knowledge_record, reset_record
+from semwm.persistence.records import (
+    Record,
+    action_record,
+    batch_record,
+    knowledge_record,
+    reset_record,
+)
 from semwm.sources import SourceRegistry, SourceStatus, TimeGuard, TimeGuardError
 from semwm.team import LocalModel
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
@@ -321,6 +327,10 @@ class WorldService:
             try:
                 with self._sources_lock:
                     placement = self.sources.place(list(detections), now)
+                    if sensor is not None and sensor.get("time") is not None:
+                        owner = sensor.get("source", _first_source(detections))
+                        placed_time = self.sources.to_service_time(owner, sensor["time"])
+                        sensor = {**sensor, "time": placed_time}
             except TimeGuardError as error:
                 raise InvalidError(_time_items(error, batch)) from error
             placed = [
@@ -330,7 +340,7 @@ class WorldService:
             with self._change():
                 self._check_sources(placed, batch)
                 try:
-                    with self._hooked(batch_record(placed)):
+                    with self._hooked(batch_record(placed, sensor)):
                         result = self._model.ingest(placed, sensor=sensor)
                 except DetectionError as error:
                     raise InvalidError(problems_to_items(error.problems, batch)) from error
@@ -542,11 +552,12 @@ class WorldService:
 
     def act(self, action: dict[str, Any]) -> Committed[tuple[list[int], int]]:
         """Apply an action (paper 004: a kick); 422 or 409 and nothing changed on a refusal.
-        Not journaled (``--data-dir``): a restart forgets the branches it made."""
+        Journaled like a batch (``--data-dir``, ``--record``)."""
         with self._locked():
             with self._change():
                 try:
-                    moved = self._model.act(action)
+                    with self._hooked(action_record(action)):
+                        moved = self._model.act(action)
                 except DetectionError as error:
                     raise InvalidError(
                         [
@@ -711,3 +722,11 @@ def _knowledge_item(path: Sequence[str | int], message: str, index: int) -> dict
     else:
         loc = ["knowledge", *parts]
     return {"loc": loc, "msg": message, "type": "knowledge", "path": parts}
+
+
+def _first_source(detections: Sequence[dict[str, Any] | Detection]) -> str | None:
+    """The source of a batch's first detection (a sensor view's default source)."""
+    for d in detections:
+        source = d.source if isinstance(d, Detection) else d.get("source")
+        return source if isinstance(source, str) else None
+    return None

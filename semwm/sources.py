@@ -184,6 +184,13 @@ class SourceRegistry:
 
     # -- detections -----------------------------------------------------------------------------
 
+    def to_service_time(self, source: str | None, stamp: float) -> float:
+        """``stamp`` of ``source``'s clock on the service clock (itself if not synced)."""
+        record = self._records.get(source)
+        if record is not None and record.clock.synced:
+            return record.clock.to_service(float(stamp))
+        return stamp
+
     def place(self, detections: Sequence[DetectionLike], now: float | None = None) -> Placement:
         """Put ``detections`` on the service clock and check the time guards.
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import AsyncIterator
-from importlib.resources import files
 from pathlib import Path
 from typing import Annotated
 
@@ -14,8 +13,10 @@ from api.feed import WorldFeed
 
 router = APIRouter(tags=["live"])
 
-STATIC_DIR = Path(str(files("api") / "static"))
-"""The page's HTML, JavaScript and CSS, shipped in the package (no build step, no CDN)."""
+STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
+"""The page's HTML, JavaScript and CSS, shipped in the package (no build step, no CDN).
+Found from this file, not ``importlib.resources.files("api")``: with the tests'
+directories on ``sys.path`` that could resolve ``api`` to a namespace of ``tests/api``."""
 
 
 def get_feed(request: Request) -> WorldFeed:

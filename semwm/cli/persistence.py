@@ -24,7 +24,7 @@ import numpy as np
 from tqdm import tqdm
 
 from semwm.knowledge import KnowledgeError, load_knowledge
-from semwm.persistence.records import ReadReport, Record, RecordError
+from semwm.persistence.records import ReadReport, Record, RecordError, batch_parts
 from semwm.persistence.replay import Replayer, model_digest
 
 
@@ -36,8 +36,9 @@ def _paced(records: Iterator[Record], speed: float | None) -> Iterator[Record]:
     start_wall: float | None = None
     start_time = 0.0
     for record in records:
-        if record.kind == "batch" and record.payload:
-            t = max(float(d["time"]) for d in record.payload)
+        detections = batch_parts(record.payload)[0] if record.kind == "batch" else []
+        if detections:
+            t = max(float(d["time"]) for d in detections)
             if start_wall is None:
                 start_wall, start_time = clock.monotonic(), t
             wait = (t - start_time) / speed - (clock.monotonic() - start_wall)
@@ -80,7 +81,7 @@ def run_replay(
             if record.kind != "batch" or result is None:
                 continue
             seconds.append(elapsed)
-            sizes.append(len(record.payload))
+            sizes.append(len(batch_parts(record.payload)[0]))
             assert replayer.model is not None
             state = replayer.model.world()
             _write_world(worlds, state.to_dict())
@@ -98,6 +99,8 @@ def run_replay(
         "n_detections": counts.detections,
         "refused_batches": counts.refused_batches,
         "resets": counts.resets,
+        "actions": counts.actions,
+        "refused_actions": counts.refused_actions,
         "skipped_knowledge_changes": counts.skipped_knowledge,
         "tail_problem": report.problem,
         "objects_at_end": len(replayer.model.world().objects) if replayer.model else 0,

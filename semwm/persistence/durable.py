@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +33,7 @@ from semwm.persistence.records import (
     DamagedRecord,
     Record,
     RecordError,
+    action_record,
     batch_record,
     config_record,
     knowledge_record,
@@ -157,11 +158,20 @@ class DurableWorld:
                 if self.journal.count() > self.compact_every:
                     self.compact()
 
-    def ingest(self, detections: DetectionInput | Iterable[DetectionInput]) -> IngestResult:
+    def ingest(
+        self,
+        detections: DetectionInput | Iterable[DetectionInput],
+        sensor: Mapping[str, Any] | None = None,
+    ) -> IngestResult:
         """:meth:`WorldModel.ingest`, journaled (nothing is journaled when it raises)."""
         batch = [d.to_dict() if isinstance(d, Detection) else dict(d) for d in as_batch(detections)]
-        with self.applying(batch_record(batch)):
-            return self.model.ingest(batch)
+        with self.applying(batch_record(batch, sensor)):
+            return self.model.ingest(batch, sensor=sensor)
+
+    def act(self, action: Mapping[str, Any]) -> list[int]:
+        """:meth:`WorldModel.act` (paper 004: a kick), journaled."""
+        with self.applying(action_record(action)):
+            return self.model.act(action)
 
     def reset(self) -> None:
         with self.applying(reset_record()):

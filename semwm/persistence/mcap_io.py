@@ -32,6 +32,8 @@ from semwm.knowledge.model import Knowledge
 from semwm.persistence.records import (
     ReadReport,
     Record,
+    batch_parts,
+    batch_record,
     config_record,
     knowledge_record,
     payload_text,
@@ -80,15 +82,18 @@ SCHEMAS: dict[str, dict[str, Any]] = {
         "title": "semwm.DetectionBatch",
         "description": "Detections accepted together by POST /detections",
         "type": "object",
-        "properties": {"detections": {"type": "array", "items": _DETECTION}},
+        "properties": {
+            "detections": {"type": "array", "items": _DETECTION},
+            "sensor": {"type": "object", "description": "where the scan's sensor looked"},
+        },
         "required": ["detections"],
     },
     "semwm.Change": {
         "title": "semwm.Change",
-        "description": "A knowledge replacement, a reset or a reorder-window change",
+        "description": "A knowledge replacement, a reset, a reorder-window change or an action",
         "type": "object",
         "properties": {
-            "kind": {"type": "string", "enum": ["knowledge", "reset", "config"]},
+            "kind": {"type": "string", "enum": ["knowledge", "reset", "config", "action"]},
             "payload": {},
         },
         "required": ["kind", "payload"],
@@ -300,7 +305,9 @@ class McapRecorder:
         """Write one change (a journal record) on its channel."""
         self._sequence += 1
         if record.kind == "batch":
-            self._write(DETECTIONS, {"detections": record.payload})
+            detections, sensor = batch_parts(record.payload)
+            batch = {"detections": detections} | ({"sensor": sensor} if sensor else {})
+            self._write(DETECTIONS, batch)
         else:
             self._write(CONTROL, {"kind": record.kind, "payload": record.payload})
 
@@ -350,7 +357,9 @@ def read_recording(path: Path, report: ReadReport | None = None) -> Iterator[Rec
                     data = json.loads(item.data)
                     report.records += 1
                     if topic == DETECTIONS:
-                        yield Record(item.sequence, "batch", data["detections"])
+                        sensor = data.get("sensor")
+                        payload = batch_record(data["detections"], sensor).payload
+                        yield Record(item.sequence, "batch", payload)
                     else:
                         yield Record(item.sequence, data["kind"], data["payload"])
         except (McapError, EOFError, ValueError, KeyError) as error:

@@ -23,7 +23,7 @@ from typing import IO, Any, Literal
 from semwm.knowledge.model import Knowledge
 
 Kind = Literal["batch", "knowledge", "reset", "config"]
-KINDS: tuple[str, ...] = ("batch", "knowledge", "reset", "config")
+KINDS: tuple[str, ...] = ("batch", "knowledge", "reset", "config", "action")
 
 
 def payload_text(payload: Any) -> str:
@@ -45,9 +45,11 @@ class Record:
     seq
         Position in the journal (1, 2, ...); 0 for a change not yet stored.
     kind
-        ``batch`` (payload: list of detections as dicts), ``knowledge`` (payload:
-        ``{"document": ..., "source": ...}``), ``reset`` (payload ``null``) or
-        ``config`` (payload: ``{"reorder_window": s}``).
+        ``batch`` (payload: list of detections as dicts, or ``{"detections": [...],
+        "sensor": {...}}`` for a scan with its sensor's view), ``knowledge`` (payload:
+        ``{"document": ..., "source": ...}``), ``reset`` (payload ``null``), ``config``
+        (payload: ``{"reorder_window": s}``) or ``action`` (payload: the action as
+        ``POST /actions`` took it).
     payload
         JSON-compatible value.
     wall_time
@@ -85,9 +87,28 @@ class Record:
         )
 
 
-def batch_record(detections: Sequence[Mapping[str, Any]]) -> Record:
-    """A batch change; ``detections`` as :meth:`semwm.WorldModel.ingest` took them."""
-    return Record(0, "batch", [dict(d) for d in detections])
+def batch_record(
+    detections: Sequence[Mapping[str, Any]], sensor: Mapping[str, Any] | None = None
+) -> Record:
+    """A batch change; ``detections`` (and ``sensor``) as :meth:`semwm.WorldModel.ingest`
+    took them. The payload is the list of detections, or ``{"detections", "sensor"}``
+    for a scan that says where its sensor looked (paper 004)."""
+    listed = [dict(d) for d in detections]
+    if sensor is None:
+        return Record(0, "batch", listed)
+    return Record(0, "batch", {"detections": listed, "sensor": dict(sensor)})
+
+
+def batch_parts(payload: Any) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+    """The detections and the sensor view (or ``None``) of a batch record's payload."""
+    if isinstance(payload, dict):
+        return list(payload["detections"]), payload.get("sensor")
+    return list(payload), None
+
+
+def action_record(action: Mapping[str, Any]) -> Record:
+    """An action (paper 004: a kick) as :meth:`semwm.WorldModel.act` took it."""
+    return Record(0, "action", dict(action))
 
 
 def knowledge_record(knowledge: Knowledge) -> Record:

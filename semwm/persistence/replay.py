@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from semwm.detection import DetectionError, OutOfOrderError
 from semwm.knowledge import KnowledgeDocument, resolve
 from semwm.knowledge.model import Knowledge
-from semwm.persistence.records import Record, RecordError
+from semwm.persistence.records import Record, RecordError, batch_parts
 from semwm.world import IngestResult, WorldModel
 from semwm.world_types import WorldState
 
@@ -50,6 +50,8 @@ class ReplayCounts:
     refused_batches: int = 0
     skipped_knowledge: int = 0
     resets: int = 0
+    actions: int = 0
+    refused_actions: int = 0
 
 
 class Replayer:
@@ -104,8 +106,9 @@ class Replayer:
             self.counts.resets += 1
         elif record.kind == "batch":
             model = self.require(where)
+            detections, sensor = batch_parts(record.payload)
             try:
-                result = model.ingest(record.payload)
+                result = model.ingest(detections, sensor=sensor)
             except (DetectionError, OutOfOrderError) as error:
                 if self.strict:
                     raise RecordError(
@@ -114,7 +117,18 @@ class Replayer:
                 self.counts.refused_batches += 1
             else:
                 self.counts.batches += 1
-                self.counts.detections += len(record.payload)
+                self.counts.detections += len(detections)
+        elif record.kind == "action":
+            try:
+                self.require(where).act(record.payload)
+            except (DetectionError, OutOfOrderError) as error:
+                if self.strict:
+                    raise RecordError(
+                        f"{where}: the action was refused on replay: {error}"
+                    ) from None
+                self.counts.refused_actions += 1
+            else:
+                self.counts.actions += 1
         else:
             raise RecordError(f"{where}: unknown record kind {record.kind!r}")
         self.last_seq = record.seq
