@@ -113,6 +113,15 @@ def validation_items(errors: Sequence[Any], prefix: Loc = ()) -> list[dict[str, 
     return items
 
 
+def json_invalid_item() -> dict[str, Any]:
+    """The 422 item of a body that is not JSON."""
+    return {
+        "loc": ["body"],
+        "msg": "the body is not valid JSON (send UTF-8 JSON with Content-Type: application/json)",
+        "type": "json_invalid",
+    }
+
+
 def install_error_handlers(app: FastAPI) -> None:
     """Map :class:`ApiError`, request validation errors and bugs to responses."""
 
@@ -136,13 +145,7 @@ def install_error_handlers(app: FastAPI) -> None:
         contract for a body that is not valid JSON is 422 with the field path."""
         assert isinstance(exc, StarletteHTTPException)
         if exc.status_code == 400 and exc.detail == "There was an error parsing the body":
-            item = {
-                "loc": ["body"],
-                "msg": "the body is not valid JSON (send UTF-8 JSON with Content-Type: "
-                "application/json)",
-                "type": "json_invalid",
-            }
-            return JSONResponse(status_code=422, content={"detail": [item]})
+            return JSONResponse(status_code=422, content={"detail": [json_invalid_item()]})
         headers = getattr(exc, "headers", None)
         return JSONResponse(
             status_code=exc.status_code, content={"detail": exc.detail}, headers=headers

@@ -64,7 +64,7 @@ class _Pending:
 
     dirty: bool = False
     changes: set[str] = field(default_factory=set)
-    detections: deque[dict[str, Any]] = field(default_factory=lambda: deque(maxlen=500))
+    detections: deque[Mapping[str, Any]] = field(default_factory=lambda: deque(maxlen=500))
     knowledge: bool = False
 
 
@@ -162,7 +162,8 @@ class WorldFeed:
             pending.dirty = True
             pending.changes.add(change.kind)
             if change.kind == "detections":
-                pending.detections.extend(detection_view(d) for d in change.detections)
+                # the views are built when a snapshot is published (nothing while nobody watches)
+                pending.detections.extend(change.detections)
                 self._applied.append((now, change.applied))
                 self._trim(now)
             elif change.kind == "knowledge":
@@ -282,7 +283,9 @@ class WorldFeed:
             knowledge = await anyio.to_thread.run_sync(self.knowledge_payload)
             self._broadcast(sse_frame("knowledge", knowledge))
         world = await anyio.to_thread.run_sync(
-            self._world_payload, list(pending.detections), sorted(pending.changes)
+            self._world_payload,
+            [detection_view(d) for d in pending.detections],
+            sorted(pending.changes),
         )
         self._broadcast(sse_frame("world", world, world["seq"]))
         for consumer in self._consumers:

@@ -8,10 +8,11 @@ covariances in square metres.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, NotRequired
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, TypeAdapter
+from typing_extensions import TypedDict  # pydantic needs it before Python 3.12
 
 from semwm.knowledge import ClassSpec, ResolvedClass
 
@@ -26,6 +27,40 @@ Finite = Annotated[float, Field(allow_inf_nan=False)]
 Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Vector = Annotated[list[Coordinate], Field(min_length=2, max_length=3)]
 Name = Annotated[str, Field(min_length=1, max_length=MAX_NAME)]
+MAX_KEY = 200
+"""The longest idempotency key (``Idempotency-Key`` header or a batch's ``batch_id``)."""
+BatchId = Annotated[str, Field(min_length=1, max_length=MAX_KEY)]
+
+
+def _square_covariance(value: list[list[float]]) -> list[list[float]]:
+    """A covariance must be square; if symmetric positive definite, within VARIANCE_RANGE.
+
+    (Symmetry and definiteness in the world's dimension are the domain's checks,
+    :func:`semwm.validation.check`.)
+    """
+    if any(len(row) != len(value) for row in value):
+        lengths = ", ".join(str(len(row)) for row in value)
+        raise ValueError(
+            f"covariance must be a square matrix; found {len(value)} rows of lengths {lengths}"
+        )
+    if value:
+        matrix = np.asarray(value, dtype=float)
+        if np.allclose(matrix, matrix.T, rtol=1e-9, atol=1e-12):
+            low, high = VARIANCE_RANGE
+            eigenvalues = np.linalg.eigvalsh(matrix)
+            if eigenvalues.min() > 0 and (eigenvalues.min() < low or eigenvalues.max() > high):
+                raise ValueError(
+                    f"covariance eigenvalues must lie in [{low:g}, {high:g}] m^2; found "
+                    f"{eigenvalues.min():.3g} to {eigenvalues.max():.3g}"
+                )
+    return value
+
+
+Covariance = Annotated[
+    list[Annotated[list[Finite], Field(max_length=3)]],
+    Field(max_length=3),
+    AfterValidator(_square_covariance),
+]
 
 
 class Body(BaseModel):
@@ -55,9 +90,7 @@ class DetectionIn(Body):
     time: Finite = Field(description="When the object was seen (s).")
     cls: Name = Field(alias="class", description="The detected class, e.g. 'Cup'.")
     position: Vector = Field(description="Measured position (m): [x, y] or [x, y, z].")
-    covariance: (
-        Annotated[list[Annotated[list[Finite], Field(max_length=3)]], Field(max_length=3)] | None
-    ) = Field(
+    covariance: Covariance | None = Field(
         default=None,
         description="Measurement noise (m^2, d x d, symmetric positive definite, eigenvalues "
         f"{VARIANCE_RANGE[0]:g} to {VARIANCE_RANGE[1]:g}); defaults to the detector's or the "
@@ -69,26 +102,6 @@ class DetectionIn(Body):
     sensor_position: Vector | None = Field(
         default=None, description="Where the sensor was (m), for detector ranges."
     )
-
-    @field_validator("covariance")
-    @classmethod
-    def _square(cls, value: list[list[float]] | None) -> list[list[float]] | None:
-        if value is not None and any(len(row) != len(value) for row in value):
-            lengths = ", ".join(str(len(row)) for row in value)
-            raise ValueError(
-                f"covariance must be a square matrix; found {len(value)} rows of lengths {lengths}"
-            )
-        if value:
-            matrix = np.asarray(value, dtype=float)
-            if np.allclose(matrix, matrix.T, rtol=1e-9, atol=1e-12):
-                low, high = VARIANCE_RANGE
-                eigenvalues = np.linalg.eigvalsh(matrix)
-                if eigenvalues.min() > 0 and (eigenvalues.min() < low or eigenvalues.max() > high):
-                    raise ValueError(
-                        f"covariance eigenvalues must lie in [{low:g}, {high:g}] m^2; found "
-                        f"{eigenvalues.min():.3g} to {eigenvalues.max():.3g}"
-                    )
-        return value
 
     def to_domain(self) -> dict[str, Any]:
         """The detection as :meth:`semwm.WorldModel.ingest` takes it."""
@@ -135,6 +148,54 @@ class DetectionBatch(Body):
         description="At least one, unless 'sensor' says where the sensor looked."
     )
     sensor: SensorIn | None = None
+    batch_id: BatchId | None = Field(
+        default=None,
+        description="A client's id for this batch: posted again (a retry), it is answered as "
+        "the first time and not applied twice. Same as the Idempotency-Key header.",
+    )
+
+
+# -- the fast path: the same bodies validated into plain dicts, straight from the JSON bytes ----
+#
+# DetectionIn and DetectionBatch document the wire format (OpenAPI) and report problems.
+# Validating an accepted body into them and dumping each back to a dict costs more than the
+# rest of the HTTP path; these TypedDicts have the same fields and constraints and give the
+# dicts the world model takes, in one call into pydantic-core for the whole body.
+# tests/api/test_api_fast_path.py holds their JSON schemas equal to the models': a field
+# added to a model must be added here too. (A batch with a sensor view, or none at all,
+# takes the models' path: api/routes/detections.py parse_json.)
+
+_FAST = ConfigDict(extra="forbid", strict=True)
+
+DetectionDict = TypedDict(
+    "DetectionDict",
+    {
+        "time": Finite,
+        "class": Name,
+        "position": Vector,
+        "covariance": NotRequired[Covariance | None],
+        "source": NotRequired[Name | None],
+        "detector": NotRequired[Name | None],
+        "label": NotRequired[Name | None],
+        "sensor_position": NotRequired[Vector | None],
+    },
+)
+DetectionDict.__pydantic_config__ = _FAST  # type: ignore[attr-defined]
+
+
+class DetectionBatchDict(TypedDict):
+    __pydantic_config__ = _FAST  # type: ignore[misc]
+
+    detections: Annotated[
+        list[DetectionDict],
+        Field(description="At least one, unless 'sensor' says where the sensor looked."),
+    ]
+    sensor: NotRequired[SensorIn | None]
+    batch_id: NotRequired[BatchId | None]
+
+
+DETECTION_ADAPTER: TypeAdapter[DetectionDict] = TypeAdapter(DetectionDict)
+BATCH_ADAPTER: TypeAdapter[DetectionBatchDict] = TypeAdapter(DetectionBatchDict)
 
 
 class IngestOut(BaseModel):

@@ -22,6 +22,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_api
+import bench_http
 import bench_scaling
 import bench_trackers
 from baselines import BENCHMARKS, RESULTS
@@ -34,6 +35,7 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
     "trackers": bench_trackers.markdown,
     "scaling": bench_scaling.markdown,
     "api": bench_api.markdown,
+    "http": bench_http.markdown,
 }
 """Benchmark name (``results/NAME.json``) -> its script's ``markdown(doc)``."""
 

@@ -1,25 +1,180 @@
-"""What a robot runs to keep its clock synced with a semwm service (paper 003, 3.3).
+"""What a robot runs to talk to a semwm service: detections in, clock sync (paper 003, 3.3).
+
+>>> with Client("http://127.0.0.1:8000", token="...") as client:   # doctest: +SKIP
+...     client.post_detections([{"time": 12.3, "class": "Cup", "position": [1.0, 2.0]}])
+{'applied': 1, 'time': 12.3, 'ignored': 0}
 
 >>> sync = ClockSync("http://127.0.0.1:8000", "robot1")       # doctest: +SKIP
 >>> sync.exchange()          # one round trip; the service updates its estimate
 >>> sync.run(every=3.0)      # a background thread, every third second as in paper 003
 
-The robot keeps stamping its detections with its own clock; the service places
-them at ``stamp + offset``. Only the standard library is used (``urllib``).
+:class:`Client` keeps one HTTP/1.1 connection open (keep-alive): a request then
+costs one round trip on loopback, not a TCP handshake and a new socket. The robot
+keeps stamping its detections with its own clock; the service places them at
+``stamp + offset``. Only the standard library is used (``http.client``, ``urllib``).
 """
 
 from __future__ import annotations
 
 import contextlib
+import http.client
 import json
 import threading
 import time
 import urllib.parse
 import urllib.request
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 Transport = Callable[[str, dict[str, Any]], dict[str, Any]]
+
+_RETRYABLE = (http.client.RemoteDisconnected, ConnectionResetError, BrokenPipeError)
+"""What a connection the server closed while it was idle raises on its next use."""
+
+
+class ServiceError(Exception):
+    """The service refused a request: ``status`` (4xx/5xx) and its JSON ``body``."""
+
+    def __init__(self, status: int, body: Any) -> None:
+        detail = body.get("detail", body) if isinstance(body, dict) else body
+        super().__init__(f"HTTP {status}: {detail}")
+        self.status = status
+        self.body = body
+
+
+class Client:
+    """One keep-alive HTTP/1.1 connection to a semwm service.
+
+    Not thread-safe: give each thread its own client. A connection the service
+    closed while idle (after its ``timeout_keep_alive``, 5 s by default) is opened
+    again before the next request; a request whose connection dropped is sent again
+    once only when that cannot apply it twice (a read, or a write with an
+    idempotency key), else the error is raised.
+
+    Parameters
+    ----------
+    base_url
+        The service, e.g. ``http://127.0.0.1:8000``.
+    token
+        The bearer token (writes need the write token when the service has one).
+    timeout
+        Seconds to wait for connecting and for each answer.
+    idle_reconnect
+        Open a new connection when the last one was idle this long (s); keep it below
+        the service's keep-alive timeout.
+    """
+
+    def __init__(
+        self,
+        base_url: str,
+        *,
+        token: str | None = None,
+        timeout: float = 10.0,
+        idle_reconnect: float = 4.0,
+    ) -> None:
+        url = urllib.parse.urlsplit(base_url)
+        if url.scheme not in ("http", "https") or not url.hostname:
+            raise ValueError(f"base_url must be http(s)://HOST[:PORT]; got {base_url!r}")
+        self.host = url.hostname
+        self.port = url.port
+        self.https = url.scheme == "https"
+        self.prefix = url.path.rstrip("/")
+        self.timeout = timeout
+        self.idle_reconnect = idle_reconnect
+        self.headers = {"content-type": "application/json", "accept": "application/json"}
+        if token is not None:
+            self.headers["authorization"] = f"Bearer {token}"
+        self._connection: http.client.HTTPConnection | None = None
+        self._last_used = 0.0
+        self.last_headers: dict[str, str] = {}
+        """The headers of the last answer (lower-case names), e.g. ``x-semwm-commit``."""
+
+    def _connect(self) -> http.client.HTTPConnection:
+        now = time.monotonic()
+        if self._connection is not None and now - self._last_used > self.idle_reconnect:
+            self.close()
+        if self._connection is None:
+            kind = http.client.HTTPSConnection if self.https else http.client.HTTPConnection
+            self._connection = kind(self.host, self.port, timeout=self.timeout)
+        return self._connection
+
+    def request(
+        self,
+        method: str,
+        path: str,
+        payload: Any = None,
+        *,
+        headers: Mapping[str, str] | None = None,
+        retry: bool | None = None,
+    ) -> Any:
+        """Send ``payload`` as JSON (``None``: no body); return the JSON answer.
+
+        Raises :class:`ServiceError` for a 4xx/5xx answer. ``retry`` (default: for
+        ``GET``): send again once if the connection dropped before an answer.
+        """
+        body = None if payload is None else json.dumps(payload, separators=(",", ":")).encode()
+        all_headers = {**self.headers, **headers} if headers else self.headers
+        again = method == "GET" if retry is None else retry
+        for attempt in (1, 2):
+            connection = self._connect()
+            try:
+                connection.request(method, self.prefix + path, body, all_headers)
+                response = connection.getresponse()
+                data = response.read()
+            except _RETRYABLE:
+                self.close()
+                if attempt == 2 or not again:
+                    raise
+                continue
+            except BaseException:
+                self.close()
+                raise
+            self._last_used = time.monotonic()
+            if response.will_close:
+                self.close()
+            self.last_headers = {k.lower(): v for k, v in response.getheaders()}
+            answer = json.loads(data) if data else None
+            if response.status >= 400:
+                raise ServiceError(response.status, answer)
+            return answer
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    def post_detections(
+        self,
+        detections: Sequence[Mapping[str, Any]],
+        *,
+        idempotency_key: str | None = None,
+    ) -> dict[str, Any]:
+        """``POST /detections`` with one batch, applied whole or not at all.
+
+        Returns ``{"applied", "time", "ignored"}``. With ``idempotency_key`` a request
+        whose connection dropped is sent again (the service applies it once).
+        """
+        headers = {"idempotency-key": idempotency_key} if idempotency_key is not None else None
+        answer: dict[str, Any] = self.request(
+            "POST",
+            "/detections",
+            {"detections": list(detections)},
+            headers=headers,
+            retry=idempotency_key is not None,
+        )
+        return answer
+
+    def get(self, path: str) -> Any:
+        """``GET path`` (e.g. ``/world?class=Cup``): the JSON answer."""
+        return self.request("GET", path)
+
+    def close(self) -> None:
+        """Close the connection (the next request opens a new one)."""
+        if self._connection is not None:
+            self._connection.close()
+            self._connection = None
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def http_transport(base_url: str, timeout: float = 5.0) -> Transport:

@@ -139,6 +139,13 @@ def _field(d: DetectionLike, name: str) -> Any:
     return d.get(name)
 
 
+def _place_words(source: str | None, stamp: float, time: float) -> tuple[str, str]:
+    """Where and whose a refused time is, for the message (built only for a refusal)."""
+    who = f"source {source!r}" if source is not None else "a detection without source"
+    where = f"time {stamp:g} s" + (f" (placed at {time:.6g} s)" if time != stamp else "")
+    return where, who
+
+
 def _with_time(d: DetectionLike, time: float) -> DetectionLike:
     if isinstance(d, Detection):
         return d.model_copy(update={"time": time})
@@ -235,10 +242,9 @@ class SourceRegistry:
         record: _Record | None,
         now: float | None,
     ) -> TimeProblem | None:
-        who = f"source {source!r}" if source is not None else "a detection without source"
-        where = f"time {stamp:g} s" + (f" (placed at {time:.6g} s)" if time != stamp else "")
         ahead = self.guard.max_ahead
         if now is not None and ahead is not None and time - now > ahead:
+            where, who = _place_words(source, stamp, time)
             return TimeProblem(
                 index,
                 source,
@@ -254,6 +260,7 @@ class SourceRegistry:
             )
             advance = time - record.last_time
             if advance - max(elapsed, 0.0) > jump:
+                where, who = _place_words(source, stamp, time)
                 return TimeProblem(
                     index,
                     source,

@@ -1,0 +1,68 @@
+"""semwm.client.Client: one keep-alive connection to the real server."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+
+from api.settings import Settings
+from api.testing import running_server
+from semwm.client import Client, ServiceError
+
+
+def cup(t: float, x: float = 1.0) -> dict[str, object]:
+    return {"time": t, "class": "Cup", "position": [x, 2.0], "source": "r1"}
+
+
+def test_requests_share_one_connection_and_refusals_carry_the_field_paths(
+    knowledge_file: Path,
+) -> None:
+    with running_server(Settings(knowledge=knowledge_file, port=0)) as url, Client(url) as client:
+        assert client.post_detections([cup(1.0)]) == {"applied": 1, "time": 1.0, "ignored": 0}
+        connection = client._connection
+        assert client.post_detections([cup(1.1), cup(1.1, 3.0)])["applied"] == 2
+        assert client.last_headers["x-semwm-commit"] == "2"
+        assert client.get("/health")["time"] == 1.1
+        assert client._connection is connection  # kept alive
+        with pytest.raises(ServiceError) as refused:
+            client.post_detections([cup(1.2), {**cup(1.2), "position": [1.0]}])
+        assert refused.value.status == 422
+        assert [item["loc"] for item in refused.value.body["detail"]] == [
+            ["body", "detections", 1, "position"]
+        ]
+        assert "position" in str(refused.value)
+        assert client.get("/health")["commit"] == 2  # nothing applied
+        assert client._connection is connection  # a 422 keeps the connection
+
+
+def test_a_connection_the_server_closed_while_idle_is_opened_again(knowledge_file: Path) -> None:
+    settings = Settings(knowledge=knowledge_file, port=0, timeout_keep_alive=0.2)
+    with running_server(settings) as url:
+        # idle_reconnect above the server's keep-alive: the client finds the socket closed
+        with Client(url, idle_reconnect=60.0) as client:
+            client.post_detections([cup(1.0)], idempotency_key="a")
+            time.sleep(0.6)
+            assert client.get("/health")["commit"] == 1  # a read is sent again
+            time.sleep(0.6)
+            answer = client.post_detections([cup(1.1)], idempotency_key="b")  # keyed: again
+            assert answer["applied"] == 1
+            assert client.get("/health")["commit"] == 2  # applied once
+        # below it (the default): a fresh connection before the socket is stale
+        with Client(url, idle_reconnect=0.1) as client:
+            client.get("/health")
+            time.sleep(0.6)
+            assert client.post_detections([cup(1.2)])["applied"] == 1
+
+
+def test_a_token_is_sent_and_a_bad_url_is_refused(knowledge_file: Path) -> None:
+    settings = Settings(knowledge=knowledge_file, port=0, token="secret-token")
+    with running_server(settings) as url:
+        with Client(url) as anonymous, pytest.raises(ServiceError) as refused:
+            anonymous.post_detections([cup(1.0)])
+        assert refused.value.status == 401
+        with Client(url, token="secret-token") as client:
+            assert client.post_detections([cup(1.0)])["applied"] == 1
+    with pytest.raises(ValueError, match="base_url"):
+        Client("127.0.0.1:8000")
