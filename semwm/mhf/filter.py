@@ -36,7 +36,7 @@ from semwm.mhf.association import Associator, DetectionOptions
 from semwm.mhf.existence import inside_probability, near_rate, survive
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted, predict_tracks
-from semwm.mhf.prune import merge, prune
+from semwm.mhf.prune import log_add, merge, prune
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
 
 
@@ -314,7 +314,9 @@ class MultipleHypothesisFilter:
             Cluster((Hypothesis(0.0, frozenset({k}), tracks[k].rate),), frozenset({k}))
             for k in common
         ]
-        if len(hypotheses) > 1:
+        if len(hypotheses) > 1 and not common:  # nothing to split off
+            result.append(Cluster.of(tuple(hypotheses)))
+        elif len(hypotheses) > 1:
             common_rate = sum(tracks[k].rate for k in common)
             rest = prune(
                 merge((h.tracks - common, h.log_weight, h.rate - common_rate) for h in hypotheses),
@@ -347,13 +349,18 @@ class MultipleHypothesisFilter:
         copies = {table.copies[k]: k for k in existing if k in table.copies}
         copy_keys = copies.keys()
         fresh = table.fresh
+        holders = table.by_label.setdefault(label, set()) if label is not None else set()
+        log_clutter = option.log_clutter
+        log_or_clutter = log_add(log_clutter, option.new_log)  # the usual "new or clutter"
+        born_at: dict[float, int] = {}  # birth weight -> the version born (mht)
         for h in hypotheses:
             tracks = h.tracks
             birth_rate, birth_log = option.new_rate, option.new_log
-            for k in presence_keys & tracks:
-                rate, log_num = presence[k]
-                if log_num > birth_log:
-                    birth_rate, birth_log = rate, log_num
+            if presence:
+                for k in presence_keys & tracks:
+                    rate, log_num = presence[k]
+                    if log_num > birth_log:
+                        birth_rate, birth_log = rate, log_num
             log_norm = h.log_weight
             if per_parent:
                 # paper 002 eqs. (5)-(7): F sums the frequencies open to this detection;
@@ -361,41 +368,49 @@ class MultipleHypothesisFilter:
                 taken = tracks & fresh
                 open_rate = h.rate - sum(table.tracks[k].rate for k in taken) if taken else h.rate
                 log_norm -= math.log(option.clutter_rate + birth_rate + open_rate)
+            labelled = label is not None and not holders.isdisjoint(tracks)
             if self.mht:
                 # one child "new object or clutter": an object with existence
                 # lambda_b / (lambda_b + lambda_c), weight lambda_b + lambda_c
-                log_unassigned = float(np.logaddexp(option.log_clutter, birth_log))
-                if label is not None and table.by_label.get(label, set()) & tracks:
+                log_unassigned = (
+                    log_or_clutter
+                    if birth_log == option.new_log
+                    else log_add(log_clutter, birth_log)
+                )
+                if labelled:
                     log_unassigned += self.associator.log_label_error
                 if birth_log > -math.inf:
-                    born = self._birth(option, birth_log, table)
+                    born = born_at.get(birth_log)
+                    if born is None:
+                        born = born_at[birth_log] = self._birth(option, birth_log, table)
                     child = tracks | {born}
-                    if label is not None:
-                        child = _give_label(child, born, label, table)
+                    if labelled:
+                        child = _give_label(child, born, holders, table)
                     children.append((child, log_norm + log_unassigned, h.rate + new_rate))
                 elif log_unassigned > -math.inf:
                     children.append((tracks, log_norm + log_unassigned, h.rate))
             else:
-                if option.log_clutter > -math.inf:
-                    children.append((tracks, log_norm + option.log_clutter, h.rate))
+                if log_clutter > -math.inf:
+                    children.append((tracks, log_norm + log_clutter, h.rate))
                 if birth_log > -math.inf:
                     child = tracks | {new_key}
-                    if label is not None:
-                        child = _give_label(child, new_key, label, table)
+                    if labelled:
+                        child = _give_label(child, new_key, holders, table)
                     children.append((child, log_norm + birth_log, h.rate + new_rate))
             for k in existing_keys & tracks:
                 updated, log_num, rate_change = existing[k]
                 child = (tracks - {k}) | {updated.key}
-                if label is not None:
-                    child = _give_label(child, updated.key, label, table)
+                if labelled:
+                    child = _give_label(child, updated.key, holders, table)
                 children.append((child, log_norm + log_num, h.rate + rate_change))
-            for k in copy_keys & tracks:
-                updated, log_num, rate_change = existing[copies[k]]
-                holder = updated.key if label is not None else table.unlabeled(updated.key)
-                child = (tracks - {k}) | {holder}
-                if label is not None:
-                    child = _give_label(child, holder, label, table)
-                children.append((child, log_norm + log_num, h.rate + rate_change))
+            if copies:
+                for k in copy_keys & tracks:
+                    updated, log_num, rate_change = existing[copies[k]]
+                    holder = updated.key if label is not None else table.unlabeled(updated.key)
+                    child = (tracks - {k}) | {holder}
+                    if label is not None:
+                        child = _give_label(child, holder, holders, table)
+                    children.append((child, log_norm + log_num, h.rate + rate_change))
         if not children:  # nothing can explain it: a knowledge base with no clutter or births
             return tuple(hypotheses)
         return prune(merge(children), self.ratio, self.max_hypotheses)
@@ -406,7 +421,7 @@ class MultipleHypothesisFilter:
         a birth likelier (eq. 4) start a version of their own."""
         born = table.births.get((option.new_track.key, birth_log))
         if born is None:
-            log_total = float(np.logaddexp(option.log_clutter, birth_log))
+            log_total = log_add(option.log_clutter, birth_log)
             first = not any(key == option.new_track.key for key, _ in table.births)
             born = (
                 option.new_track
@@ -475,11 +490,12 @@ def _product(
 
 
 def _give_label(
-    child: frozenset[int], holder: int, label: str, table: _TrackTable
+    child: frozenset[int], holder: int, holders: set[int], table: _TrackTable
 ) -> frozenset[int]:
     """Paper 000 III-B: the object that took the labeled detection holds the label; any
-    other object of the hypothesis with that label gives it up."""
-    others = (table.by_label.get(label, set()) & child) - {holder}
+    other object of the hypothesis with that label (``holders``: every version holding
+    it) gives it up."""
+    others = (holders & child) - {holder}
     if not others:
         return child
     return (child - others) | {table.unlabeled(k) for k in others}
