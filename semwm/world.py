@@ -22,6 +22,7 @@ from scipy.optimize import linear_sum_assignment
 
 from semwm.detection import OutOfOrderError
 from semwm.filters.motion import FloatArray
+from semwm.filters.small import mahalanobis_squared
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf.existence import inside_probability
@@ -445,7 +446,7 @@ class WorldModel:
         x, P = position[rows], covariance[rows]
         delta = x[:, None, :] - x[None, :, :]
         S = P[:, None] + P[None, :]
-        d2 = np.einsum("abi,abi->ab", delta, np.linalg.solve(S, delta[..., None])[..., 0])
+        d2 = mahalanobis_squared(delta, S)
         for a, b in zip(*np.nonzero(np.triu(d2 <= _SAME_OBJECT_GATE, k=1)), strict=True):
             first, second = candidates[int(a)], candidates[int(b)]
             if first in together and second in together:

@@ -39,9 +39,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from semwm.filters.batched import mahalanobis_squared
 from semwm.filters.factory import FilterFactory
 from semwm.filters.motion import FloatArray
+from semwm.filters.small import inverse_and_log_det, mahalanobis_squared, quadratic_form
 from semwm.knowledge.coverage import birth_volume, coverage_volume
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
@@ -230,7 +230,7 @@ class Associator:
             by_class.setdefault(m.cls, []).append(j)
         states: dict[int, tuple[FloatArray, FloatArray, FloatArray]] = {}
         for cls, rows in by_class.items():
-            z = np.stack([measurements[j].z for j in rows])
+            z = np.array([measurements[j].z for j in rows])
             x, P, mu = self.factory.filter_for(cls).initial_states(z)
             for row, j in enumerate(rows):
                 states[j] = (x[row], P[row], mu[row])
@@ -246,11 +246,7 @@ class Associator:
         the detection's detector (:mod:`semwm.mhf.classes`).
         """
         if self.model == "mht":
-            probs = np.stack([t.class_probs for t in tracks])  # (T, K)
-            columns = np.stack(
-                [self.class_model.likelihood(m.detector, m.cls) for m in measurements]
-            )  # (D, K)
-            mixed: FloatArray = columns @ probs.T
+            mixed: FloatArray = self._reported(measurements) @ self._class_probs(tracks).T
             return mixed
         track_classes = sorted({t.cls for t in tracks})
         detection_classes = sorted({m.cls for m in measurements})
@@ -266,6 +262,14 @@ class Associator:
         cols = np.fromiter((t_index[t.cls] for t in tracks), dtype=np.intp)
         result: FloatArray = table[rows[:, None], cols[None, :]]
         return result
+
+    def _class_probs(self, tracks: Sequence[Track]) -> FloatArray:
+        """``(T, K)``: each object's class distribution."""
+        return np.array([t.class_probs for t in tracks])
+
+    def _reported(self, measurements: Sequence[Measurement]) -> FloatArray:
+        """``(D, K)``: ``L(C(z) | c)`` of each detection for every class ``c``."""
+        return np.array([self.class_model.likelihood(m.detector, m.cls) for m in measurements])
 
     def _label_pairs(
         self, predicted: Predicted, measurements: Sequence[Measurement], diff: FloatArray
@@ -296,9 +300,13 @@ class Associator:
         if not tracks or not measurements:
             return found
         mht = self.model == "mht"
-        z = np.stack([m.z for m in measurements])  # (D, d)
-        R = np.stack([m.R for m in measurements])  # (D, d, d)
-        likelihood = self._class_likelihoods(tracks, measurements)  # (D, T): eq. (8)
+        z = np.array([m.z for m in measurements])  # (D, d)
+        R = np.array([m.R for m in measurements])  # (D, d, d)
+        if mht:  # L_class from the class distributions (semwm.mhf.classes)
+            probs, reported = self._class_probs(tracks), self._reported(measurements)
+            likelihood: FloatArray = reported @ probs.T  # (D, T)
+        else:
+            likelihood = self._class_likelihoods(tracks, measurements)  # (D, T): eq. (8)
         diff = z[:, None, :] - predicted.position[None, :, :]  # (D, T, d)
         labelled = self._label_pairs(predicted, measurements, diff) if mht else None
         candidate = likelihood > 0.0
@@ -329,9 +337,7 @@ class Associator:
             flt = self.factory.filter_for(cls)
             rows_i = ii[pairs]
             rows_j = jj[pairs]
-            x = np.stack([predicted.x[i] for i in rows_i])
-            P = np.stack([predicted.P[i] for i in rows_i])
-            mu = np.stack([predicted.mu[i] for i in rows_i])
+            x, P, mu = predicted.stacked(rows_i)
             x_new, P_new, mu_new, log_lik = flt.update(x, P, mu, z[rows_j], R[rows_j])
             if self.model == "paper":
                 x_hat, _ = flt.combine(x_new, P_new, mu_new)
@@ -342,14 +348,7 @@ class Associator:
                     log_lik, labelled[rows_j, rows_i], diff, rows_j, rows_i, predicted, R
                 )
             if mht:  # Bayes over the class distribution (semwm.mhf.classes)
-                prior = np.stack([tracks[i].class_probs for i in rows_i])
-                columns = np.stack(
-                    [
-                        self.class_model.likelihood(measurements[j].detector, measurements[j].cls)
-                        for j in rows_j
-                    ]
-                )
-                posteriors = prior * columns
+                posteriors = probs[rows_i] * reported[rows_j]
                 posteriors /= posteriors.sum(axis=1, keepdims=True)
                 names = self.class_model.names
                 refined_all = [names[k] for k in self.class_model.published_many(posteriors)]
@@ -404,10 +403,8 @@ class Associator:
         wide_var = (self.label_gate / 3.0) ** 2
         S_wide = predicted.position_covariance[rows_i] + R[rows_j] + wide_var * np.eye(d)
         delta = diff[rows_j, rows_i]
-        _, logdet = np.linalg.slogdet(S_wide)
-        log_wide = -0.5 * (
-            mahalanobis_squared(delta, S_wide) + logdet + d * math.log(2.0 * math.pi)
-        )
+        S_inv, log_det = inverse_and_log_det(S_wide)
+        log_wide = -0.5 * (quadratic_form(delta, S_inv) + log_det + d * math.log(2.0 * math.pi))
         mixed = np.logaddexp(log_lik + math.log(0.9), log_wide + math.log(0.1))
         result: FloatArray = np.where(labelled, mixed, log_lik)
         return result

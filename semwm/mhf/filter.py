@@ -30,6 +30,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from semwm.filters.factory import FilterFactory
+from semwm.filters.small import largest_eigenvalue
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf.association import Associator, DetectionOptions
@@ -190,7 +191,7 @@ class MultipleHypothesisFilter:
         for row in np.flatnonzero(~finite):
             gone.add(predicted.tracks[int(row)].key)
         covariance = np.where(finite[:, None, None], predicted.position_covariance, 0.0)
-        largest = np.linalg.eigvalsh(covariance)[:, -1]
+        largest = largest_eigenvalue(covariance)
         classes = self.knowledge.classes
         for i, track in enumerate(predicted.tracks):
             spec = classes.get(track.cls)
@@ -223,7 +224,7 @@ class MultipleHypothesisFilter:
         if gone:
             clusters = self.without(clusters, gone, table.tracks)
             alive = [i for i, k in enumerate(keys) if k not in gone]
-            predicted = _subset(predicted, alive)
+            predicted = predicted.subset(alive)
         options = self.associator.options(
             predicted,
             measurements,
@@ -514,15 +515,3 @@ def _without(
         else:
             children.append((h.tracks, h.log_weight, h.rate))
     return prune(merge(children), 0.0, len(children))
-
-
-def _subset(predicted: Predicted, rows: list[int]) -> Predicted:
-    return Predicted(
-        tuple(predicted.tracks[i] for i in rows),
-        [predicted.x[i] for i in rows],
-        [predicted.P[i] for i in rows],
-        [predicted.mu[i] for i in rows],
-        [predicted.state_mean[i] for i in rows],
-        predicted.position[rows],
-        predicted.position_covariance[rows],
-    )
