@@ -14,7 +14,7 @@ changes nothing.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -122,6 +122,7 @@ class WorldModel:
     """
 
     def __init__(self, knowledge: Knowledge, *, reorder_window: float = 0.0) -> None:
+        self._summaries: dict[int, tuple[Track, FloatArray, FloatArray, float]] = {}
         if reorder_window < 0 or not math.isfinite(reorder_window):
             raise ValueError(f"reorder_window must be a finite number >= 0; got {reorder_window}")
         self.reorder_window = reorder_window
@@ -132,10 +133,12 @@ class WorldModel:
     def _set_knowledge(self, knowledge: Knowledge) -> None:
         self._knowledge = knowledge
         self._mhf = MultipleHypothesisFilter(knowledge)
+        self._summaries = {}  # the region may have changed
 
     def reset(self) -> None:
         """Forget every detection and object."""
         self._state = MHFState.empty()
+        self._summaries = {}
         self._log: list[_LoggedScan] = []
         self._seq = 0
         self._ids: dict[int, int] = {}
@@ -377,30 +380,25 @@ class WorldModel:
         # existence at the latest time (the scan updated it); inside the region judged
         # from each version as stored (a version not updated by the scan is not
         # predicted: this decides ids only; queries predict)
-        tracks = [state.tracks[k] for k in state.tracks]
-        inside = dict(
-            zip(
-                (t.key for t in tracks),
-                inside_probability(
-                    *_stored_positions(tracks, self._knowledge.world.dimension),
-                    self._knowledge.world.region,
-                ).tolist(),
-                strict=True,
-            )
-        )
+        stored = self._stored_summaries(state.tracks)
         totals: dict[int, float] = {}
         chosen: dict[int, Track] = {}
+        existence = state.existence
         for cluster in state.clusters:
             for h in cluster.hypotheses:  # most probable first
                 p = math.exp(h.log_weight)
                 for key in h.tracks:
                     track = state.tracks[key]
-                    value = p * state.existence.get(key, 1.0) * inside[key]
+                    value = p * existence.get(key, 1.0) * stored[key][3]
                     totals[track.lineage] = totals.get(track.lineage, 0.0) + value
                     chosen.setdefault(track.lineage, track)
         lineages = list(totals)
-        position, covariance = _stored_positions(
-            [chosen[lineage] for lineage in lineages], self._knowledge.world.dimension
+        dim = self._knowledge.world.dimension
+        position = np.array([stored[chosen[lineage].key][1] for lineage in lineages]).reshape(
+            -1, dim
+        )
+        covariance = np.array([stored[chosen[lineage].key][2] for lineage in lineages]).reshape(
+            -1, dim, dim
         )
         merged = self._same_objects(
             {
@@ -412,6 +410,32 @@ class WorldModel:
         )
         floor = self._knowledge.world.min_existence
         return {lineage: m.track for lineage, m in merged.items() if m.existence >= floor}
+
+    def _stored_summaries(
+        self, tracks: Mapping[int, Track]
+    ) -> dict[int, tuple[Track, FloatArray, FloatArray, float]]:
+        """Key -> (version, combined position, its covariance, probability of being inside
+        the region) of every stored version. Versions are immutable, so each is computed
+        once, for the versions new since the last call (batched), and kept while stored."""
+        previous = self._summaries
+        current: dict[int, tuple[Track, FloatArray, FloatArray, float]] = {}
+        new: list[Track] = []
+        for key, track in tracks.items():
+            known = previous.get(key)
+            if known is not None and known[0] is track:
+                current[key] = known
+            else:
+                new.append(track)
+        if new:
+            dim = self._knowledge.world.dimension
+            position, covariance = _stored_positions(new, dim)
+            inside = inside_probability(position, covariance, self._knowledge.world.region)
+            for track, x, P, p in zip(
+                new, list(position), list(covariance), inside.tolist(), strict=True
+            ):
+                current[track.key] = (track, x, P, p)
+        self._summaries = current
+        return current
 
     def _same_objects(
         self,

@@ -134,8 +134,20 @@ class Associator:
             },
             can_appear,
         )
+        self._initial_classes: dict[tuple[str, str], tuple[FloatArray, str]] = {}
         self.label_gate = knowledge.world.label_gate
         self.log_label_error = math.log(knowledge.world.label_error_rate)
+
+    def _initial_class(self, detector: str, reported: str) -> tuple[FloatArray, str]:
+        """A new object's class distribution and published class (``mht``), once per
+        detector and reported class (read-only: every new object shares it)."""
+        key = (detector, reported)
+        known = self._initial_classes.get(key)
+        if known is None:
+            probs = self.class_model.initial(detector, reported)
+            probs.flags.writeable = False
+            known = self._initial_classes[key] = (probs, self.class_model.published(probs))
+        return known
 
     def _spread(self, radius: float) -> float:
         """Log spatial density of a birth within ``radius`` (mht model), else 0."""
@@ -170,21 +182,19 @@ class Associator:
                         and _distance(m.z, known.position) <= relation.max_distance
                     ) and log_num > base_log:
                         base_rate, base_log = relation.frequency, log_num
-                for i, track in enumerate(tracks):
-                    if (
-                        track.cls in covered
-                        and (
-                            float(np.linalg.norm(m.z - predicted.position[i]))
-                            <= relation.max_distance
-                        )
-                        and log_num > presence.get(track.key, (0.0, -math.inf))[1]
-                    ):
-                        presence[track.key] = (relation.frequency, log_num)
+                targets = [i for i, track in enumerate(tracks) if track.cls in covered]
+                if not targets:
+                    continue
+                offset = predicted.position[targets] - m.z
+                near = np.einsum("td,td->t", offset, offset) <= relation.max_distance**2
+                for i in np.flatnonzero(near).tolist():
+                    key = tracks[targets[i]].key
+                    if log_num > presence.get(key, (0.0, -math.inf))[1]:
+                        presence[key] = (relation.frequency, log_num)
             presence = {k: v for k, v in presence.items() if v[1] > base_log}
             x, P, mu = new_states[j]
             if self.model == "mht":
-                class_probs = self.class_model.initial(m.detector, m.cls)
-                cls = self.class_model.published(class_probs)
+                class_probs, cls = self._initial_class(m.detector, m.cls)
                 if cls != m.cls:
                     x, P, mu = conform(
                         x, P, mu, self.factory.filter_for(m.cls), self.factory.filter_for(cls)
@@ -277,12 +287,17 @@ class Associator:
         """``(D, T)``: the object holds the detection's label and is within ``label_gate``
         (paper 000: a robot's own report decides which object it is)."""
         tracks = predicted.tracks
-        same = np.array(
-            [[m.label is not None and t.label == m.label for t in tracks] for m in measurements],
-            dtype=bool,
-        )
-        if not same.any():
+        same = np.zeros((len(measurements), len(tracks)), dtype=bool)
+        labels = {m.label for m in measurements if m.label is not None}
+        if not labels:
             return same
+        holding = [i for i, t in enumerate(tracks) if t.label in labels]
+        if not holding:
+            return same
+        for j, m in enumerate(measurements):
+            if m.label is not None:
+                for i in holding:
+                    same[j, i] = tracks[i].label == m.label
         close: BoolArray = (diff * diff).sum(-1) <= self.label_gate**2
         result: BoolArray = same & close
         return result
@@ -352,10 +367,15 @@ class Associator:
                 posteriors /= posteriors.sum(axis=1, keepdims=True)
                 names = self.class_model.names
                 refined_all = [names[k] for k in self.class_model.published_many(posteriors)]
-            for row, (i, j) in enumerate(zip(rows_i, rows_j, strict=True)):
+            # one conversion per batch, not one numpy scalar per pair
+            pair_likelihood = likelihood[rows_j, rows_i].tolist()
+            pair_log_lik = log_lik.tolist()
+            states = zip(list(x_new), list(P_new), list(mu_new), strict=True)
+            for row, (i, j, (xs, Ps, mus)) in enumerate(
+                zip(rows_i.tolist(), rows_j.tolist(), states, strict=True)
+            ):
                 old = tracks[i]
                 m = measurements[j]
-                xs, Ps, mus = x_new[row], P_new[row], mu_new[row]
                 if mht:
                     class_probs, refined = posteriors[row], refined_all[row]
                 else:  # eq. (8): the more specific of two compatible classes
@@ -378,7 +398,7 @@ class Associator:
                     rate,
                     class_probs,
                 )
-                log_num = _log(old.rate) + math.log(likelihood[j, i]) + float(log_lik[row])
+                log_num = _log(old.rate) + math.log(pair_likelihood[row]) + pair_log_lik[row]
                 if mht:
                     log_num += _log(existence[i]) if existence else 0.0
                     if m.label is not None and old.label not in (None, m.label):

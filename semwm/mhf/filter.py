@@ -62,6 +62,7 @@ class _TrackTable:
         self.fresh: set[int] = set()
         self.existence: dict[int, float] = dict(state.existence)
         self.births: dict[tuple[int, float], Track] = {}
+        self.born: set[int] = set()  # detections (their new track's key) that started one
         self.origin: dict[int, int] = {key: key for key in self.tracks}
         self.derived: dict[int, list[int]] = {}
         self.copies: dict[int, int] = {}  # pre-scan version -> its copy without label
@@ -113,6 +114,9 @@ class MultipleHypothesisFilter:
         self.max_hypotheses = knowledge.world.max_hypotheses
         world = knowledge.world
         self.mht = world.association_model == "mht"
+        # whether hypotheses factorise over clusters: true for ``mht``; the ``paper``
+        # model's normaliser F sums over every object, so it keeps one global cluster
+        self.factorised = self.associator.model == "mht"
         self.missed_detections = self.mht and world.missed_detection_term
         self.region = world.region
         self.removal_existence = world.removal_existence if self.mht else 0.0
@@ -282,11 +286,6 @@ class MultipleHypothesisFilter:
             result.extend(self._split(hypotheses, tracks))
         return tuple(result)
 
-    @property
-    def factorised(self) -> bool:
-        """Whether hypotheses factorise over clusters: true for ``mht``; the ``paper``
-        model's normaliser F sums over every object, so it keeps one global cluster."""
-        return self.associator.model == "mht"
 
     def without(
         self, clusters: Sequence[Cluster], gone: set[int], tracks: Mapping[int, Track]
@@ -423,7 +422,7 @@ class MultipleHypothesisFilter:
         born = table.births.get((option.new_track.key, birth_log))
         if born is None:
             log_total = log_add(option.log_clutter, birth_log)
-            first = not any(key == option.new_track.key for key, _ in table.births)
+            first = option.new_track.key not in table.born
             born = (
                 option.new_track
                 if first
@@ -431,6 +430,7 @@ class MultipleHypothesisFilter:
             )
             table.add(born, fresh=True, existence=math.exp(birth_log - log_total))
             table.births[(option.new_track.key, birth_log)] = born
+            table.born.add(option.new_track.key)
         return born.key
 
 
