@@ -385,13 +385,17 @@ class WorldModel:
         chosen: dict[int, Track] = {}
         existence = state.existence
         for cluster in state.clusters:
+            # each version's probability mass: the sum over the hypotheses holding it
+            mass: dict[int, float] = {}
             for h in cluster.hypotheses:  # most probable first
                 p = math.exp(h.log_weight)
                 for key in h.tracks:
-                    track = state.tracks[key]
-                    value = p * existence.get(key, 1.0) * stored[key][3]
-                    totals[track.lineage] = totals.get(track.lineage, 0.0) + value
-                    chosen.setdefault(track.lineage, track)
+                    mass[key] = mass.get(key, 0.0) + p
+            for key, p in mass.items():  # in order of first appearance
+                track = state.tracks[key]
+                value = p * existence.get(key, 1.0) * stored[key][3]
+                totals[track.lineage] = totals.get(track.lineage, 0.0) + value
+                chosen.setdefault(track.lineage, track)
         lineages = list(totals)
         dim = self._knowledge.world.dimension
         position = np.array([stored[chosen[lineage].key][1] for lineage in lineages]).reshape(

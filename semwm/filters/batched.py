@@ -19,6 +19,8 @@ Tracking and Navigation*, Section 11.6.6 (IMM); FilterPy's ``KalmanFilter`` and
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -113,16 +115,26 @@ def update(
     # K = P H^T S^-1
     K = PHt @ S_inv  # (N, M, n, d)
     x_new = x + np.einsum("nmid,nmd->nmi", K, y)
-    IKH = np.broadcast_to(np.eye(n), (N, M, n, n)).copy()
+    IKH = np.empty((N, M, n, n))
+    IKH[...] = _identity(n)
     IKH[:, :, :, :d] -= K
     P_new = IKH @ P @ np.swapaxes(IKH, -1, -2) + K @ R[:, None, :, :] @ np.swapaxes(K, -1, -2)
     # log N(y; 0, S)
     log_lam = -0.5 * (quadratic_form(y, S_inv) + log_det + d * _LOG_2PI)  # (N, M)
+    if M == 1:  # a Kalman filter: one mode, probability 1
+        return x_new, P_new, np.ones((N, 1)), log_lam[:, 0]
     log_weighted = log_lam + np.log(np.maximum(mu, 1e-300))
     top = log_weighted.max(axis=1, keepdims=True)
     log_total = top[:, 0] + np.log(np.exp(log_weighted - top).sum(axis=1))
     mu_new = np.exp(log_weighted - log_total[:, None])
     return x_new, P_new, mu_new, log_total
+
+
+@functools.cache
+def _identity(n: int) -> FloatArray:
+    identity = np.eye(n)
+    identity.flags.writeable = False
+    return identity
 
 
 def combine(x: FloatArray, P: FloatArray, mu: FloatArray) -> tuple[FloatArray, FloatArray]:

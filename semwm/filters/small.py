@@ -30,13 +30,13 @@ def inverse_and_log_det(S: FloatArray) -> tuple[FloatArray, FloatArray]:
     if d == 2:
         a, b, c = S[..., 0, 0], S[..., 0, 1], S[..., 1, 1]
         det = a * c - b * b
-        if np.all(det > 0.0) and np.all(a > 0.0):
+        if det.size == 0 or (det.min() > 0.0 and a.min() > 0.0):
             inverse = np.empty_like(S)
             inverse[..., 0, 0] = c / det
             inverse[..., 1, 1] = a / det
             inverse[..., 0, 1] = inverse[..., 1, 0] = -b / det
             return inverse, np.log(det)
-    elif d == 1 and np.all(S > 0.0):
+    elif d == 1 and (S.size == 0 or S.min() > 0.0):
         return 1.0 / S, np.log(S[..., 0, 0])
     np.linalg.cholesky(S)  # raises when S is not positive definite
     _, log_det = np.linalg.slogdet(S)

@@ -34,7 +34,7 @@ from semwm.filters.small import largest_eigenvalue
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf.association import Associator, DetectionOptions
-from semwm.mhf.existence import inside_probability, near_rate, survive
+from semwm.mhf.existence import near_rate, survive
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted, predict_tracks
 from semwm.mhf.prune import log_add, merge, prune
@@ -154,7 +154,7 @@ class MultipleHypothesisFilter:
         )
         if not self.missed_detections:
             return mu, np.zeros(len(predicted.tracks))
-        inside = inside_probability(predicted.position, predicted.position_covariance, self.region)
+        inside = predicted.inside_region(self.region)
         f = np.array([classes[t.cls].detection_frequency for t in predicted.tracks]) * inside
         return mu, f
 
@@ -185,9 +185,7 @@ class MultipleHypothesisFilter:
         if not predicted.tracks:
             return gone
         if self.mht and existence is not None:
-            inside = inside_probability(
-                predicted.position, predicted.position_covariance, self.region
-            )
+            inside = predicted.inside_region(self.region)
             for i, track in enumerate(predicted.tracks):
                 if existence.get(track.key, 1.0) * inside[i] < self.removal_existence:
                     gone.add(track.key)
@@ -478,11 +476,16 @@ def _product(
         return (Hypothesis(0.0, frozenset(), 0.0),)
     result = groups[0]
     for hypotheses in groups[1:]:
+        # combinations below eq. (3)'s floor are pruned: skip them before building their
+        # sets (the clusters hold disjoint objects, so no two combinations merge)
+        best = max(a.log_weight for a in result) + max(b.log_weight for b in hypotheses)
+        floor = best + math.log(ratio) if ratio > 0.0 else -math.inf
         result = prune(
             merge(
                 (a.tracks | b.tracks, a.log_weight + b.log_weight, a.rate + b.rate)
                 for a in result
                 for b in hypotheses
+                if a.log_weight + b.log_weight >= floor
             ),
             ratio,
             max_hypotheses,

@@ -11,6 +11,7 @@ import numpy.typing as npt
 
 from semwm.filters.factory import ClassFilter, FilterFactory
 from semwm.filters.motion import FloatArray
+from semwm.mhf.existence import Region, inside_probability
 from semwm.mhf.state import Track
 
 IndexArray = npt.NDArray[np.intp]
@@ -70,6 +71,19 @@ class Predicted:
     position_covariance: FloatArray
     batches: dict[str, tuple[FloatArray, FloatArray, FloatArray]] = field(default_factory=dict)
     batch_row: IndexArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    _inside: dict[Region | None, FloatArray] = field(
+        default_factory=dict, compare=False, repr=False
+    )
+
+    def inside_region(self, region: Region | None) -> FloatArray:
+        """Each object's probability of being inside ``region``
+        (:func:`semwm.mhf.existence.inside_probability`), computed once per region."""
+        known = self._inside.get(region)
+        if known is None:
+            known = self._inside[region] = inside_probability(
+                self.position, self.position_covariance, region
+            )
+        return known
 
     def subset(self, rows: list[int]) -> Predicted:
         """The predictions of ``rows``, in that order."""

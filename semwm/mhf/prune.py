@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from operator import itemgetter
 
 from semwm.mhf.state import Hypothesis
 
@@ -37,10 +38,6 @@ def merge(
     return merged
 
 
-def _first(item: tuple[float, frozenset[int], float]) -> float:
-    return item[0]
-
-
 def prune(
     merged: dict[frozenset[int], list[float]], ratio: float, max_hypotheses: int
 ) -> tuple[Hypothesis, ...]:
@@ -52,7 +49,7 @@ def prune(
     items = [(lw, tracks, rate) for tracks, (lw, rate) in merged.items() if lw > -math.inf]
     if not items:
         raise ValueError("every hypothesis has zero probability")
-    items.sort(key=_first, reverse=True)
+    items.sort(key=itemgetter(0), reverse=True)
     best = items[0][0]
     if ratio > 0.0:
         floor = best + math.log(ratio)
