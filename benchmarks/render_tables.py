@@ -23,6 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_api
 import bench_scaling
+import bench_speed
 import bench_trackers
 from baselines import BENCHMARKS, RESULTS
 
@@ -34,6 +35,7 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
     "trackers": bench_trackers.markdown,
     "scaling": bench_scaling.markdown,
     "api": bench_api.markdown,
+    "speed": bench_speed.markdown,
 }
 """Benchmark name (``results/NAME.json``) -> its script's ``markdown(doc)``."""
 
