@@ -472,10 +472,15 @@ class WorldModel:
 
         rows = np.array([marginals[lineage].row for lineage in candidates])
         x, P = position[rows], covariance[rows]
+        # cheap bound first (d^2 <= gate * lambda_max(S) <= gate * trace(S)), then the
+        # Mahalanobis distance of the pairs that pass it only
         delta = x[:, None, :] - x[None, :, :]
-        S = P[:, None] + P[None, :]
-        d2 = mahalanobis_squared(delta, S)
-        for a, b in zip(*np.nonzero(np.triu(d2 <= _SAME_OBJECT_GATE, k=1)), strict=True):
+        spread = np.trace(P, axis1=1, axis2=2)
+        near = (delta * delta).sum(-1) <= _SAME_OBJECT_GATE * (spread[:, None] + spread[None, :])
+        aa, bb = np.nonzero(np.triu(near, k=1))
+        d2 = mahalanobis_squared(delta[aa, bb], P[aa] + P[bb])
+        close = d2 <= _SAME_OBJECT_GATE
+        for a, b in zip(aa[close].tolist(), bb[close].tolist(), strict=True):
             first, second = candidates[int(a)], candidates[int(b)]
             if first in together and second in together:
                 continue  # the most probable hypothesis holds both: two objects
