@@ -284,7 +284,6 @@ class MultipleHypothesisFilter:
             result.extend(self._split(hypotheses, tracks))
         return tuple(result)
 
-
     def without(
         self, clusters: Sequence[Cluster], gone: set[int], tracks: Mapping[int, Track]
     ) -> tuple[Cluster, ...]:
