@@ -24,6 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_api
 import bench_http
 import bench_scaling
+import bench_speed
 import bench_trackers
 from baselines import BENCHMARKS, RESULTS
 
@@ -36,6 +37,7 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
     "scaling": bench_scaling.markdown,
     "api": bench_api.markdown,
     "http": bench_http.markdown,
+    "speed": bench_speed.markdown,
 }
 """Benchmark name (``results/NAME.json``) -> its script's ``markdown(doc)``."""
 

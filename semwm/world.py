@@ -38,6 +38,7 @@ from semwm.detection import (
     SensorReport,
 )
 from semwm.filters.motion import FloatArray
+from semwm.filters.small import mahalanobis_squared
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf.actions import Kick, apply_kick
@@ -156,6 +157,7 @@ class WorldModel:
     """Most scans kept for replay; each holds a reference to the state before it."""
 
     def __init__(self, knowledge: Knowledge, *, reorder_window: float = 0.0) -> None:
+        self._summaries: dict[int, tuple[Track, FloatArray, FloatArray, float]] = {}
         if reorder_window < 0 or not math.isfinite(reorder_window):
             raise ValueError(f"reorder_window must be a finite number >= 0; got {reorder_window}")
         self.reorder_window = reorder_window
@@ -166,11 +168,13 @@ class WorldModel:
     def _set_knowledge(self, knowledge: Knowledge) -> None:
         self._knowledge = knowledge
         self._mhf = MultipleHypothesisFilter(knowledge)
+        self._summaries = {}  # the region may have changed
 
     def reset(self) -> None:
         """Forget every detection and object."""
         self._state = MHFState.empty()
         self._book = ConfidenceBook()
+        self._summaries = {}
         self._log: list[_LoggedScan] = []
         self._replay_floor: _Floor | None = None  # no replay at or before this scan
         self._seq = 0
@@ -587,30 +591,29 @@ class WorldModel:
         # existence at the latest time (the scan updated it); inside the region judged
         # from each version as stored (a version not updated by the scan is not
         # predicted: this decides ids only; queries predict)
-        tracks = [state.tracks[k] for k in state.tracks]
-        inside = dict(
-            zip(
-                (t.key for t in tracks),
-                inside_probability(
-                    *_stored_positions(tracks, self._knowledge.world.dimension),
-                    self._knowledge.world.region,
-                ).tolist(),
-                strict=True,
-            )
-        )
+        stored = self._stored_summaries(state.tracks)
         totals: dict[int, float] = {}
         chosen: dict[int, Track] = {}
+        existence = state.existence
         for cluster in state.clusters:
+            # each version's probability mass: the sum over the hypotheses holding it
+            mass: dict[int, float] = {}
             for h in cluster.hypotheses:  # most probable first
                 p = math.exp(h.log_weight)
                 for key in h.tracks:
-                    track = state.tracks[key]
-                    value = p * state.existence.get(key, 1.0) * inside[key]
-                    totals[track.lineage] = totals.get(track.lineage, 0.0) + value
-                    chosen.setdefault(track.lineage, track)
+                    mass[key] = mass.get(key, 0.0) + p
+            for key, p in mass.items():  # in order of first appearance
+                track = state.tracks[key]
+                value = p * existence.get(key, 1.0) * stored[key][3]
+                totals[track.lineage] = totals.get(track.lineage, 0.0) + value
+                chosen.setdefault(track.lineage, track)
         lineages = list(totals)
-        position, covariance = _stored_positions(
-            [chosen[lineage] for lineage in lineages], self._knowledge.world.dimension
+        dim = self._knowledge.world.dimension
+        position = np.array([stored[chosen[lineage].key][1] for lineage in lineages]).reshape(
+            -1, dim
+        )
+        covariance = np.array([stored[chosen[lineage].key][2] for lineage in lineages]).reshape(
+            -1, dim, dim
         )
         merged = self._same_objects(
             {
@@ -622,6 +625,32 @@ class WorldModel:
         )
         floor = self._knowledge.world.min_existence
         return {lineage: m.track for lineage, m in merged.items() if m.existence >= floor}
+
+    def _stored_summaries(
+        self, tracks: Mapping[int, Track]
+    ) -> dict[int, tuple[Track, FloatArray, FloatArray, float]]:
+        """Key -> (version, combined position, its covariance, probability of being inside
+        the region) of every stored version. Versions are immutable, so each is computed
+        once, for the versions new since the last call (batched), and kept while stored."""
+        previous = self._summaries
+        current: dict[int, tuple[Track, FloatArray, FloatArray, float]] = {}
+        new: list[Track] = []
+        for key, track in tracks.items():
+            known = previous.get(key)
+            if known is not None and known[0] is track:
+                current[key] = known
+            else:
+                new.append(track)
+        if new:
+            dim = self._knowledge.world.dimension
+            position, covariance = _stored_positions(new, dim)
+            inside = inside_probability(position, covariance, self._knowledge.world.region)
+            for track, x, P, p in zip(
+                new, list(position), list(covariance), inside.tolist(), strict=True
+            ):
+                current[track.key] = (track, x, P, p)
+        self._summaries = current
+        return current
 
     def _same_objects(
         self,
@@ -654,10 +683,15 @@ class WorldModel:
 
         rows = np.array([marginals[lineage].row for lineage in candidates])
         x, P = position[rows], covariance[rows]
+        # cheap bound first (d^2 <= gate * lambda_max(S) <= gate * trace(S)), then the
+        # Mahalanobis distance of the pairs that pass it only
         delta = x[:, None, :] - x[None, :, :]
-        S = P[:, None] + P[None, :]
-        d2 = np.einsum("abi,abi->ab", delta, np.linalg.solve(S, delta[..., None])[..., 0])
-        for a, b in zip(*np.nonzero(np.triu(d2 <= _SAME_OBJECT_GATE, k=1)), strict=True):
+        spread = np.trace(P, axis1=1, axis2=2)
+        near = (delta * delta).sum(-1) <= _SAME_OBJECT_GATE * (spread[:, None] + spread[None, :])
+        aa, bb = np.nonzero(np.triu(near, k=1))
+        d2 = mahalanobis_squared(delta[aa, bb], P[aa] + P[bb])
+        close = d2 <= _SAME_OBJECT_GATE
+        for a, b in zip(aa[close].tolist(), bb[close].tolist(), strict=True):
             first, second = candidates[int(a)], candidates[int(b)]
             if first in together and second in together:
                 continue  # the most probable hypothesis holds both: two objects

@@ -19,8 +19,14 @@ Tracking and Navigation*, Section 11.6.6 (IMM); FilterPy's ``KalmanFilter`` and
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numpy.typing import NDArray
+
+from semwm.filters.small import inverse_and_log_det, mahalanobis_squared, quadratic_form
+
+__all__ = ["combine", "imm_mix", "mahalanobis_squared", "predict", "update"]
 
 FloatArray = NDArray[np.float64]
 _LOG_2PI = float(np.log(2.0 * np.pi))
@@ -105,22 +111,30 @@ def update(
     y = z[:, None, :] - x[:, :, :d]  # (N, M, d)
     PHt = P[:, :, :, :d]  # (N, M, n, d)
     S = P[:, :, :d, :d] + R[:, None, :, :]  # (N, M, d, d)
-    L = np.linalg.cholesky(S)
-    # K = P H^T S^-1, computed as solve(S, (P H^T)^T)^T
-    K = np.swapaxes(np.linalg.solve(S, np.swapaxes(PHt, -1, -2)), -1, -2)  # (N, M, n, d)
+    S_inv, log_det = inverse_and_log_det(S)  # closed form for d <= 2 (semwm.filters.small)
+    # K = P H^T S^-1
+    K = PHt @ S_inv  # (N, M, n, d)
     x_new = x + np.einsum("nmid,nmd->nmi", K, y)
-    IKH = np.broadcast_to(np.eye(n), (N, M, n, n)).copy()
+    IKH = np.empty((N, M, n, n))
+    IKH[...] = _identity(n)
     IKH[:, :, :, :d] -= K
     P_new = IKH @ P @ np.swapaxes(IKH, -1, -2) + K @ R[:, None, :, :] @ np.swapaxes(K, -1, -2)
-    # log N(y; 0, S) through the Cholesky factor
-    w = np.linalg.solve(L, y[..., None])[..., 0]
-    log_det = 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
-    log_lam = -0.5 * ((w * w).sum(-1) + log_det + d * _LOG_2PI)  # (N, M)
+    # log N(y; 0, S)
+    log_lam = -0.5 * (quadratic_form(y, S_inv) + log_det + d * _LOG_2PI)  # (N, M)
+    if M == 1:  # a Kalman filter: one mode, probability 1
+        return x_new, P_new, np.ones((N, 1)), log_lam[:, 0]
     log_weighted = log_lam + np.log(np.maximum(mu, 1e-300))
     top = log_weighted.max(axis=1, keepdims=True)
     log_total = top[:, 0] + np.log(np.exp(log_weighted - top).sum(axis=1))
     mu_new = np.exp(log_weighted - log_total[:, None])
     return x_new, P_new, mu_new, log_total
+
+
+@functools.cache
+def _identity(n: int) -> FloatArray:
+    identity = np.eye(n)
+    identity.flags.writeable = False
+    return identity
 
 
 def combine(x: FloatArray, P: FloatArray, mu: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -135,10 +149,3 @@ def combine(x: FloatArray, P: FloatArray, mu: FloatArray) -> tuple[FloatArray, F
     spread = x - x_hat[:, None, :]
     P_hat = np.einsum("nm,nmij->nij", mu, P) + np.einsum("nm,nmi,nmj->nij", mu, spread, spread)
     return x_hat, P_hat
-
-
-def mahalanobis_squared(residual: FloatArray, covariance: FloatArray) -> FloatArray:
-    """:math:`r^T C^{-1} r` for stacked residuals ``(..., d)`` and covariances ``(..., d, d)``."""
-    solved = np.linalg.solve(covariance, residual[..., None])[..., 0]
-    result: FloatArray = np.einsum("...i,...i->...", residual, solved)
-    return result

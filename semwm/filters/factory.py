@@ -18,8 +18,8 @@ from semwm.filters.motion import (
     FloatArray,
     MotionOrder,
     decay_factors,
-    process_noises,
-    transition_matrices,
+    process_noise_coefficients,
+    transition_coefficients,
 )
 from semwm.knowledge.model import IMMFilterSpec, Knowledge, ResolvedClass
 
@@ -72,16 +72,36 @@ class ClassFilter:
         mu = np.broadcast_to(self.initial_mode_probabilities, (K, self.modes))
         return x, P.copy(), mu.copy()
 
-    def models(self, dt: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """F and Q per object and mode for time steps ``dt``; each ``(N, M, n, n)``."""
-        Fs = [transition_matrices(order, self.dim, dt, self.with_velocity) for order in self.orders]
-        Qs = [
-            process_noises(
-                order, self.dim, dt, Qc, self.with_velocity, self.stationary_velocity_variance
+    @cached_property
+    def _model_coefficients(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``F0, F1`` ``(M, n, n)`` and ``C`` ``(4, M, n, n)``: ``F(dt) = F0 + dt F1`` and
+        ``Q(dt) = sum_k dt^k C[k]`` per mode (:mod:`semwm.filters.motion`)."""
+        pairs = [
+            transition_coefficients(order, self.dim, self.with_velocity) for order in self.orders
+        ]
+        C = [
+            process_noise_coefficients(
+                order, self.dim, Qc, self.with_velocity, self.stationary_velocity_variance
             )
             for order, Qc in zip(self.orders, self.spectral_densities, strict=True)
         ]
-        return np.stack(Fs, axis=1), np.stack(Qs, axis=1)
+        return (
+            np.array([F0 for F0, _ in pairs]),
+            np.array([F1 for _, F1 in pairs]),
+            np.stack(C, axis=1),
+        )
+
+    def models(self, dt: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """F and Q per object and mode for time steps ``dt``; each ``(N, M, n, n)``.
+
+        .. math:: F(\\Delta) = F_0 + \\Delta F_1, \\quad
+           Q(\\Delta) = C_0 + \\Delta (C_1 + \\Delta (C_2 + \\Delta C_3))
+        """
+        F0, F1, C = self._model_coefficients
+        t = np.asarray(dt, dtype=float)[:, None, None, None]
+        F = F0 + t * F1
+        Q = C[0] + t * (C[1] + t * (C[2] + t * C[3]))
+        return F, Q
 
     def predict(
         self, x: FloatArray, P: FloatArray, mu: FloatArray, dt: FloatArray

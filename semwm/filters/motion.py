@@ -109,3 +109,37 @@ def decay_factors(speed: FloatArray, dt: FloatArray, alpha: float) -> tuple[Floa
     g = np.where(speed > 0.0, tau - alpha * tau**2 / (2.0 * safe), 0.0)
     k = np.where(speed > 0.0, np.maximum(0.0, speed - alpha * dt) / safe, 0.0)
     return g, k
+
+
+def transition_coefficients(
+    order: MotionOrder, dim: int, with_velocity: bool = False
+) -> tuple[FloatArray, FloatArray]:
+    """``F0, F1`` with ``F(dt) = F0 + dt F1`` (:func:`transition_matrices`), each ``(n, n)``."""
+    F0 = transition_matrices(order, dim, np.zeros(1), with_velocity)[0]
+    F1 = transition_matrices(order, dim, np.ones(1), with_velocity)[0] - F0
+    return F0, F1
+
+
+def process_noise_coefficients(
+    order: MotionOrder,
+    dim: int,
+    spectral_density: FloatArray,
+    with_velocity: bool = False,
+    stationary_velocity_variance: float = 0.0,
+) -> FloatArray:
+    """``C`` ``(4, n, n)`` with ``Q(dt) = C[0] + dt C[1] + dt^2 C[2] + dt^3 C[3]``, the
+    polynomial :func:`process_noises` evaluates (so that a batch of time steps costs a
+    few array operations)."""
+    Qc = np.asarray(spectral_density, dtype=float)
+    n = state_size(order, dim, with_velocity)
+    C = np.zeros((4, n, n))
+    if order == "first_order":
+        C[3, :dim, :dim] = Qc / 3.0
+        C[2, :dim, dim:] = Qc / 2.0
+        C[2, dim:, :dim] = Qc / 2.0
+        C[1, dim:, dim:] = Qc
+    else:
+        C[1, :dim, :dim] = Qc
+        if n > dim:
+            C[0, dim:, dim:] = stationary_velocity_variance * np.eye(dim)
+    return C

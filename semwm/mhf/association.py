@@ -39,9 +39,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from semwm.filters.batched import mahalanobis_squared
 from semwm.filters.factory import FilterFactory
 from semwm.filters.motion import FloatArray
+from semwm.filters.small import inverse_and_log_det, mahalanobis_squared, quadratic_form
 from semwm.knowledge.coverage import birth_volume, coverage_volume
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
@@ -134,8 +134,20 @@ class Associator:
             },
             can_appear,
         )
+        self._initial_classes: dict[tuple[str, str], tuple[FloatArray, str]] = {}
         self.label_gate = knowledge.world.label_gate
         self.log_label_error = math.log(knowledge.world.label_error_rate)
+
+    def _initial_class(self, detector: str, reported: str) -> tuple[FloatArray, str]:
+        """A new object's class distribution and published class (``mht``), once per
+        detector and reported class (read-only: every new object shares it)."""
+        key = (detector, reported)
+        known = self._initial_classes.get(key)
+        if known is None:
+            probs = self.class_model.initial(detector, reported)
+            probs.flags.writeable = False
+            known = self._initial_classes[key] = (probs, self.class_model.published(probs))
+        return known
 
     def _spread(self, radius: float) -> float:
         """Log spatial density of a birth within ``radius`` (mht model), else 0."""
@@ -170,21 +182,19 @@ class Associator:
                         and _distance(m.z, known.position) <= relation.max_distance
                     ) and log_num > base_log:
                         base_rate, base_log = relation.frequency, log_num
-                for i, track in enumerate(tracks):
-                    if (
-                        track.cls in covered
-                        and (
-                            float(np.linalg.norm(m.z - predicted.position[i]))
-                            <= relation.max_distance
-                        )
-                        and log_num > presence.get(track.key, (0.0, -math.inf))[1]
-                    ):
-                        presence[track.key] = (relation.frequency, log_num)
+                targets = [i for i, track in enumerate(tracks) if track.cls in covered]
+                if not targets:
+                    continue
+                offset = predicted.position[targets] - m.z
+                near = np.einsum("td,td->t", offset, offset) <= relation.max_distance**2
+                for i in np.flatnonzero(near).tolist():
+                    key = tracks[targets[i]].key
+                    if log_num > presence.get(key, (0.0, -math.inf))[1]:
+                        presence[key] = (relation.frequency, log_num)
             presence = {k: v for k, v in presence.items() if v[1] > base_log}
             x, P, mu = new_states[j]
             if self.model == "mht":
-                class_probs = self.class_model.initial(m.detector, m.cls)
-                cls = self.class_model.published(class_probs)
+                class_probs, cls = self._initial_class(m.detector, m.cls)
                 if cls != m.cls:
                     x, P, mu = conform(
                         x, P, mu, self.factory.filter_for(m.cls), self.factory.filter_for(cls)
@@ -230,7 +240,7 @@ class Associator:
             by_class.setdefault(m.cls, []).append(j)
         states: dict[int, tuple[FloatArray, FloatArray, FloatArray]] = {}
         for cls, rows in by_class.items():
-            z = np.stack([measurements[j].z for j in rows])
+            z = np.array([measurements[j].z for j in rows])
             x, P, mu = self.factory.filter_for(cls).initial_states(z)
             for row, j in enumerate(rows):
                 states[j] = (x[row], P[row], mu[row])
@@ -246,11 +256,7 @@ class Associator:
         the detection's detector (:mod:`semwm.mhf.classes`).
         """
         if self.model == "mht":
-            probs = np.stack([t.class_probs for t in tracks])  # (T, K)
-            columns = np.stack(
-                [self.class_model.likelihood(m.detector, m.cls) for m in measurements]
-            )  # (D, K)
-            mixed: FloatArray = columns @ probs.T
+            mixed: FloatArray = self._reported(measurements) @ self._class_probs(tracks).T
             return mixed
         track_classes = sorted({t.cls for t in tracks})
         detection_classes = sorted({m.cls for m in measurements})
@@ -267,18 +273,31 @@ class Associator:
         result: FloatArray = table[rows[:, None], cols[None, :]]
         return result
 
+    def _class_probs(self, tracks: Sequence[Track]) -> FloatArray:
+        """``(T, K)``: each object's class distribution."""
+        return np.array([t.class_probs for t in tracks])
+
+    def _reported(self, measurements: Sequence[Measurement]) -> FloatArray:
+        """``(D, K)``: ``L(C(z) | c)`` of each detection for every class ``c``."""
+        return np.array([self.class_model.likelihood(m.detector, m.cls) for m in measurements])
+
     def _label_pairs(
         self, predicted: Predicted, measurements: Sequence[Measurement], diff: FloatArray
     ) -> BoolArray:
         """``(D, T)``: the object holds the detection's label and is within ``label_gate``
         (paper 000: a robot's own report decides which object it is)."""
         tracks = predicted.tracks
-        same = np.array(
-            [[m.label is not None and t.label == m.label for t in tracks] for m in measurements],
-            dtype=bool,
-        )
-        if not same.any():
+        same = np.zeros((len(measurements), len(tracks)), dtype=bool)
+        labels = {m.label for m in measurements if m.label is not None}
+        if not labels:
             return same
+        holding = [i for i, t in enumerate(tracks) if t.label in labels]
+        if not holding:
+            return same
+        for j, m in enumerate(measurements):
+            if m.label is not None:
+                for i in holding:
+                    same[j, i] = tracks[i].label == m.label
         close: BoolArray = (diff * diff).sum(-1) <= self.label_gate**2
         result: BoolArray = same & close
         return result
@@ -296,9 +315,13 @@ class Associator:
         if not tracks or not measurements:
             return found
         mht = self.model == "mht"
-        z = np.stack([m.z for m in measurements])  # (D, d)
-        R = np.stack([m.R for m in measurements])  # (D, d, d)
-        likelihood = self._class_likelihoods(tracks, measurements)  # (D, T): eq. (8)
+        z = np.array([m.z for m in measurements])  # (D, d)
+        R = np.array([m.R for m in measurements])  # (D, d, d)
+        if mht:  # L_class from the class distributions (semwm.mhf.classes)
+            probs, reported = self._class_probs(tracks), self._reported(measurements)
+            likelihood: FloatArray = reported @ probs.T  # (D, T)
+        else:
+            likelihood = self._class_likelihoods(tracks, measurements)  # (D, T): eq. (8)
         diff = z[:, None, :] - predicted.position[None, :, :]  # (D, T, d)
         labelled = self._label_pairs(predicted, measurements, diff) if mht else None
         candidate = likelihood > 0.0
@@ -329,9 +352,7 @@ class Associator:
             flt = self.factory.filter_for(cls)
             rows_i = ii[pairs]
             rows_j = jj[pairs]
-            x = np.stack([predicted.x[i] for i in rows_i])
-            P = np.stack([predicted.P[i] for i in rows_i])
-            mu = np.stack([predicted.mu[i] for i in rows_i])
+            x, P, mu = predicted.stacked(rows_i)
             x_new, P_new, mu_new, log_lik = flt.update(x, P, mu, z[rows_j], R[rows_j])
             if self.model == "paper":
                 x_hat, _ = flt.combine(x_new, P_new, mu_new)
@@ -342,21 +363,19 @@ class Associator:
                     log_lik, labelled[rows_j, rows_i], diff, rows_j, rows_i, predicted, R
                 )
             if mht:  # Bayes over the class distribution (semwm.mhf.classes)
-                prior = np.stack([tracks[i].class_probs for i in rows_i])
-                columns = np.stack(
-                    [
-                        self.class_model.likelihood(measurements[j].detector, measurements[j].cls)
-                        for j in rows_j
-                    ]
-                )
-                posteriors = prior * columns
+                posteriors = probs[rows_i] * reported[rows_j]
                 posteriors /= posteriors.sum(axis=1, keepdims=True)
                 names = self.class_model.names
                 refined_all = [names[k] for k in self.class_model.published_many(posteriors)]
-            for row, (i, j) in enumerate(zip(rows_i, rows_j, strict=True)):
+            # one conversion per batch, not one numpy scalar per pair
+            pair_likelihood = likelihood[rows_j, rows_i].tolist()
+            pair_log_lik = log_lik.tolist()
+            states = zip(list(x_new), list(P_new), list(mu_new), strict=True)
+            for row, (i, j, (xs, Ps, mus)) in enumerate(
+                zip(rows_i.tolist(), rows_j.tolist(), states, strict=True)
+            ):
                 old = tracks[i]
                 m = measurements[j]
-                xs, Ps, mus = x_new[row], P_new[row], mu_new[row]
                 if mht:
                     class_probs, refined = posteriors[row], refined_all[row]
                 else:  # eq. (8): the more specific of two compatible classes
@@ -379,7 +398,7 @@ class Associator:
                     rate,
                     class_probs,
                 )
-                log_num = _log(old.rate) + math.log(likelihood[j, i]) + float(log_lik[row])
+                log_num = _log(old.rate) + math.log(pair_likelihood[row]) + pair_log_lik[row]
                 if mht:
                     log_num += _log(existence[i]) if existence else 0.0
                     if m.label is not None and old.label not in (None, m.label):
@@ -404,10 +423,8 @@ class Associator:
         wide_var = (self.label_gate / 3.0) ** 2
         S_wide = predicted.position_covariance[rows_i] + R[rows_j] + wide_var * np.eye(d)
         delta = diff[rows_j, rows_i]
-        _, logdet = np.linalg.slogdet(S_wide)
-        log_wide = -0.5 * (
-            mahalanobis_squared(delta, S_wide) + logdet + d * math.log(2.0 * math.pi)
-        )
+        S_inv, log_det = inverse_and_log_det(S_wide)
+        log_wide = -0.5 * (quadratic_form(delta, S_inv) + log_det + d * math.log(2.0 * math.pi))
         mixed = np.logaddexp(log_lik + math.log(0.9), log_wide + math.log(0.1))
         result: FloatArray = np.where(labelled, mixed, log_lik)
         return result

@@ -30,13 +30,14 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from semwm.filters.factory import FilterFactory
+from semwm.filters.small import largest_eigenvalue
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf.association import Associator, DetectionOptions
-from semwm.mhf.existence import inside_probability, looked_at, near_rate, survive
+from semwm.mhf.existence import looked_at, near_rate, survive
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted, predict_tracks
-from semwm.mhf.prune import merge, prune
+from semwm.mhf.prune import log_add, merge, prune
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
 
 
@@ -61,6 +62,7 @@ class _TrackTable:
         self.fresh: set[int] = set()
         self.existence: dict[int, float] = dict(state.existence)
         self.births: dict[tuple[int, float], Track] = {}
+        self.born: set[int] = set()  # detections (their new track's key) that started one
         self.origin: dict[int, int] = {key: key for key in self.tracks}
         self.derived: dict[int, list[int]] = {}
         self.copies: dict[int, int] = {}  # pre-scan version -> its copy without label
@@ -112,6 +114,9 @@ class MultipleHypothesisFilter:
         self.max_hypotheses = knowledge.world.max_hypotheses
         world = knowledge.world
         self.mht = world.association_model == "mht"
+        # whether hypotheses factorise over clusters: true for ``mht``; the ``paper``
+        # model's normaliser F sums over every object, so it keeps one global cluster
+        self.factorised = self.associator.model == "mht"
         self.missed_detections = self.mht and world.missed_detection_term
         self.region = world.region
         self.removal_existence = world.removal_existence if self.mht else 0.0
@@ -149,7 +154,7 @@ class MultipleHypothesisFilter:
         )
         if not self.missed_detections:
             return mu, np.zeros(len(predicted.tracks))
-        inside = inside_probability(predicted.position, predicted.position_covariance, self.region)
+        inside = predicted.inside_region(self.region)
         f = np.array([classes[t.cls].detection_frequency for t in predicted.tracks]) * inside
         return mu, f
 
@@ -180,9 +185,7 @@ class MultipleHypothesisFilter:
         if not predicted.tracks:
             return gone
         if self.mht and existence is not None:
-            inside = inside_probability(
-                predicted.position, predicted.position_covariance, self.region
-            )
+            inside = predicted.inside_region(self.region)
             for i, track in enumerate(predicted.tracks):
                 if existence.get(track.key, 1.0) * inside[i] < self.removal_existence:
                     gone.add(track.key)
@@ -190,7 +193,7 @@ class MultipleHypothesisFilter:
         for row in np.flatnonzero(~finite):
             gone.add(predicted.tracks[int(row)].key)
         covariance = np.where(finite[:, None, None], predicted.position_covariance, 0.0)
-        largest = np.linalg.eigvalsh(covariance)[:, -1]
+        largest = largest_eigenvalue(covariance)
         classes = self.knowledge.classes
         for i, track in enumerate(predicted.tracks):
             spec = classes.get(track.cls)
@@ -230,7 +233,7 @@ class MultipleHypothesisFilter:
         if gone:
             clusters = self.without(clusters, gone, table.tracks)
             alive = [i for i, k in enumerate(keys) if k not in gone]
-            predicted = _subset(predicted, alive)
+            predicted = predicted.subset(alive)
         options = self.associator.options(
             predicted,
             measurements,
@@ -293,12 +296,6 @@ class MultipleHypothesisFilter:
             result.extend(self._split(hypotheses, tracks))
         return tuple(result)
 
-    @property
-    def factorised(self) -> bool:
-        """Whether hypotheses factorise over clusters: true for ``mht``; the ``paper``
-        model's normaliser F sums over every object, so it keeps one global cluster."""
-        return self.associator.model == "mht"
-
     def without(
         self, clusters: Sequence[Cluster], gone: set[int], tracks: Mapping[int, Track]
     ) -> tuple[Cluster, ...]:
@@ -326,7 +323,9 @@ class MultipleHypothesisFilter:
             Cluster((Hypothesis(0.0, frozenset({k}), tracks[k].rate),), frozenset({k}))
             for k in common
         ]
-        if len(hypotheses) > 1:
+        if len(hypotheses) > 1 and not common:  # nothing to split off
+            result.append(Cluster.of(tuple(hypotheses)))
+        elif len(hypotheses) > 1:
             common_rate = sum(tracks[k].rate for k in common)
             rest = prune(
                 merge((h.tracks - common, h.log_weight, h.rate - common_rate) for h in hypotheses),
@@ -359,13 +358,18 @@ class MultipleHypothesisFilter:
         copies = {table.copies[k]: k for k in existing if k in table.copies}
         copy_keys = copies.keys()
         fresh = table.fresh
+        holders = table.by_label.setdefault(label, set()) if label is not None else set()
+        log_clutter = option.log_clutter
+        log_or_clutter = log_add(log_clutter, option.new_log)  # the usual "new or clutter"
+        born_at: dict[float, int] = {}  # birth weight -> the version born (mht)
         for h in hypotheses:
             tracks = h.tracks
             birth_rate, birth_log = option.new_rate, option.new_log
-            for k in presence_keys & tracks:
-                rate, log_num = presence[k]
-                if log_num > birth_log:
-                    birth_rate, birth_log = rate, log_num
+            if presence:
+                for k in presence_keys & tracks:
+                    rate, log_num = presence[k]
+                    if log_num > birth_log:
+                        birth_rate, birth_log = rate, log_num
             log_norm = h.log_weight
             if per_parent:
                 # paper 002 eqs. (5)-(7): F sums the frequencies open to this detection;
@@ -373,41 +377,49 @@ class MultipleHypothesisFilter:
                 taken = tracks & fresh
                 open_rate = h.rate - sum(table.tracks[k].rate for k in taken) if taken else h.rate
                 log_norm -= math.log(option.clutter_rate + birth_rate + open_rate)
+            labelled = label is not None and not holders.isdisjoint(tracks)
             if self.mht:
                 # one child "new object or clutter": an object with existence
                 # lambda_b / (lambda_b + lambda_c), weight lambda_b + lambda_c
-                log_unassigned = float(np.logaddexp(option.log_clutter, birth_log))
-                if label is not None and table.by_label.get(label, set()) & tracks:
+                log_unassigned = (
+                    log_or_clutter
+                    if birth_log == option.new_log
+                    else log_add(log_clutter, birth_log)
+                )
+                if labelled:
                     log_unassigned += self.associator.log_label_error
                 if birth_log > -math.inf:
-                    born = self._birth(option, birth_log, table)
+                    born = born_at.get(birth_log)
+                    if born is None:
+                        born = born_at[birth_log] = self._birth(option, birth_log, table)
                     child = tracks | {born}
-                    if label is not None:
-                        child = _give_label(child, born, label, table)
+                    if labelled:
+                        child = _give_label(child, born, holders, table)
                     children.append((child, log_norm + log_unassigned, h.rate + new_rate))
                 elif log_unassigned > -math.inf:
                     children.append((tracks, log_norm + log_unassigned, h.rate))
             else:
-                if option.log_clutter > -math.inf:
-                    children.append((tracks, log_norm + option.log_clutter, h.rate))
+                if log_clutter > -math.inf:
+                    children.append((tracks, log_norm + log_clutter, h.rate))
                 if birth_log > -math.inf:
                     child = tracks | {new_key}
-                    if label is not None:
-                        child = _give_label(child, new_key, label, table)
+                    if labelled:
+                        child = _give_label(child, new_key, holders, table)
                     children.append((child, log_norm + birth_log, h.rate + new_rate))
             for k in existing_keys & tracks:
                 updated, log_num, rate_change = existing[k]
                 child = (tracks - {k}) | {updated.key}
-                if label is not None:
-                    child = _give_label(child, updated.key, label, table)
+                if labelled:
+                    child = _give_label(child, updated.key, holders, table)
                 children.append((child, log_norm + log_num, h.rate + rate_change))
-            for k in copy_keys & tracks:
-                updated, log_num, rate_change = existing[copies[k]]
-                holder = updated.key if label is not None else table.unlabeled(updated.key)
-                child = (tracks - {k}) | {holder}
-                if label is not None:
-                    child = _give_label(child, holder, label, table)
-                children.append((child, log_norm + log_num, h.rate + rate_change))
+            if copies:
+                for k in copy_keys & tracks:
+                    updated, log_num, rate_change = existing[copies[k]]
+                    holder = updated.key if label is not None else table.unlabeled(updated.key)
+                    child = (tracks - {k}) | {holder}
+                    if label is not None:
+                        child = _give_label(child, holder, holders, table)
+                    children.append((child, log_norm + log_num, h.rate + rate_change))
         if not children:  # nothing can explain it: a knowledge base with no clutter or births
             return tuple(hypotheses)
         return prune(merge(children), self.ratio, self.max_hypotheses)
@@ -418,8 +430,8 @@ class MultipleHypothesisFilter:
         a birth likelier (eq. 4) start a version of their own."""
         born = table.births.get((option.new_track.key, birth_log))
         if born is None:
-            log_total = float(np.logaddexp(option.log_clutter, birth_log))
-            first = not any(key == option.new_track.key for key, _ in table.births)
+            log_total = log_add(option.log_clutter, birth_log)
+            first = option.new_track.key not in table.born
             born = (
                 option.new_track
                 if first
@@ -427,6 +439,7 @@ class MultipleHypothesisFilter:
             )
             table.add(born, fresh=True, existence=math.exp(birth_log - log_total))
             table.births[(option.new_track.key, birth_log)] = born
+            table.born.add(option.new_track.key)
         return born.key
 
 
@@ -474,11 +487,16 @@ def _product(
         return (Hypothesis(0.0, frozenset(), 0.0),)
     result = groups[0]
     for hypotheses in groups[1:]:
+        # combinations below eq. (3)'s floor are pruned: skip them before building their
+        # sets (the clusters hold disjoint objects, so no two combinations merge)
+        best = max(a.log_weight for a in result) + max(b.log_weight for b in hypotheses)
+        floor = best + math.log(ratio) if ratio > 0.0 else -math.inf
         result = prune(
             merge(
                 (a.tracks | b.tracks, a.log_weight + b.log_weight, a.rate + b.rate)
                 for a in result
                 for b in hypotheses
+                if a.log_weight + b.log_weight >= floor
             ),
             ratio,
             max_hypotheses,
@@ -487,11 +505,12 @@ def _product(
 
 
 def _give_label(
-    child: frozenset[int], holder: int, label: str, table: _TrackTable
+    child: frozenset[int], holder: int, holders: set[int], table: _TrackTable
 ) -> frozenset[int]:
     """Paper 000 III-B: the object that took the labeled detection holds the label; any
-    other object of the hypothesis with that label gives it up."""
-    others = (table.by_label.get(label, set()) & child) - {holder}
+    other object of the hypothesis with that label (``holders``: every version holding
+    it) gives it up."""
+    others = (holders & child) - {holder}
     if not others:
         return child
     return (child - others) | {table.unlabeled(k) for k in others}
@@ -510,15 +529,3 @@ def _without(
         else:
             children.append((h.tracks, h.log_weight, h.rate))
     return prune(merge(children), 0.0, len(children))
-
-
-def _subset(predicted: Predicted, rows: list[int]) -> Predicted:
-    return Predicted(
-        tuple(predicted.tracks[i] for i in rows),
-        [predicted.x[i] for i in rows],
-        [predicted.P[i] for i in rows],
-        [predicted.mu[i] for i in rows],
-        [predicted.state_mean[i] for i in rows],
-        predicted.position[rows],
-        predicted.position_covariance[rows],
-    )

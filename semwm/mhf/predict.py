@@ -4,13 +4,17 @@ from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from semwm.filters.factory import ClassFilter, FilterFactory
 from semwm.filters.motion import FloatArray
+from semwm.mhf.existence import Region, inside_probability
 from semwm.mhf.state import Track
+
+IndexArray = npt.NDArray[np.intp]
 
 
 def conform(
@@ -52,6 +56,10 @@ class Predicted:
 
     ``x``, ``P``, ``mu`` are lists of per-track arrays (filters differ in size);
     ``position`` ``(N, d)`` and ``position_covariance`` ``(N, d, d)`` are stacked.
+    ``batches`` holds the same states stacked per class filter (class name ->
+    ``(x, P, mu)`` with ``(K, M, n)``, ``(K, M, n, n)``, ``(K, M)``) and
+    ``batch_row[i]`` is track ``i``'s row in its class's batch, so that batched
+    updates index them instead of stacking rows again.
     """
 
     tracks: tuple[Track, ...]
@@ -61,33 +69,84 @@ class Predicted:
     state_mean: list[FloatArray]
     position: FloatArray
     position_covariance: FloatArray
+    batches: dict[str, tuple[FloatArray, FloatArray, FloatArray]] = field(default_factory=dict)
+    batch_row: IndexArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    _inside: dict[Region | None, FloatArray] = field(
+        default_factory=dict, compare=False, repr=False
+    )
+
+    def inside_region(self, region: Region | None) -> FloatArray:
+        """Each object's probability of being inside ``region``
+        (:func:`semwm.mhf.existence.inside_probability`), computed once per region."""
+        known = self._inside.get(region)
+        if known is None:
+            known = self._inside[region] = inside_probability(
+                self.position, self.position_covariance, region
+            )
+        return known
+
+    def subset(self, rows: list[int]) -> Predicted:
+        """The predictions of ``rows``, in that order."""
+        return Predicted(
+            tuple(self.tracks[i] for i in rows),
+            [self.x[i] for i in rows],
+            [self.P[i] for i in rows],
+            [self.mu[i] for i in rows],
+            [self.state_mean[i] for i in rows],
+            self.position[rows],
+            self.position_covariance[rows],
+            self.batches,
+            self.batch_row[rows],
+        )
+
+    def stacked(self, rows: IndexArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``x``, ``P``, ``mu`` of ``rows`` (tracks of one class), stacked."""
+        x, P, mu = self.batches[self.tracks[int(rows[0])].cls]
+        in_batch = self.batch_row[rows]
+        return x[in_batch], P[in_batch], mu[in_batch]
 
 
 def predict_tracks(tracks: Sequence[Track], time: float, factory: FilterFactory) -> Predicted:
     """Predict every track to ``time`` (s), one batched call per class filter."""
     d = factory.dim
     count = len(tracks)
-    xs: list[FloatArray] = [np.empty(0)] * count
-    Ps: list[FloatArray] = [np.empty(0)] * count
-    mus: list[FloatArray] = [np.empty(0)] * count
-    means: list[FloatArray] = [np.empty(0)] * count
+    xs: list[FloatArray] = [_EMPTY] * count
+    Ps: list[FloatArray] = [_EMPTY] * count
+    mus: list[FloatArray] = [_EMPTY] * count
+    means: list[FloatArray] = [_EMPTY] * count
     position = np.zeros((count, d))
     position_covariance = np.zeros((count, d, d))
+    batch_row = np.zeros(count, dtype=np.intp)
+    batches: dict[str, tuple[FloatArray, FloatArray, FloatArray]] = {}
     groups: dict[str, list[int]] = defaultdict(list)
     for i, track in enumerate(tracks):
         groups[track.cls].append(i)
     for cls, members in groups.items():
         flt = factory.filter_for(cls)
-        states = [conform(tracks[i].x, tracks[i].P, tracks[i].mu, None, flt) for i in members]
-        x = np.stack([s[0] for s in states])
-        P = np.stack([s[1] for s in states])
-        mu = np.stack([s[2] for s in states])
-        dt = np.array([time - tracks[i].time for i in members])
+        shape = (flt.modes, flt.state_size)
+        group = [tracks[i] for i in members]
+        if all(t.x.shape == shape for t in group):
+            x = np.array([t.x for t in group])
+            P = np.array([t.P for t in group])
+            mu = np.array([t.mu for t in group])
+        else:
+            states = [conform(t.x, t.P, t.mu, None, flt) for t in group]
+            x = np.array([s[0] for s in states])
+            P = np.array([s[1] for s in states])
+            mu = np.array([s[2] for s in states])
+        dt = np.array([time - t.time for t in group])
         x, P, mu = flt.predict(x, P, mu, dt)
         x_hat, P_hat = flt.combine(x, P, mu)
         idx = np.asarray(members)
         position[idx] = x_hat[:, :d]
         position_covariance[idx] = P_hat[:, :d, :d]
+        batch_row[idx] = np.arange(len(members))
+        batches[cls] = (x, P, mu)
         for row, i in enumerate(members):
             xs[i], Ps[i], mus[i], means[i] = x[row], P[row], mu[row], x_hat[row]
-    return Predicted(tuple(tracks), xs, Ps, mus, means, position, position_covariance)
+    return Predicted(
+        tuple(tracks), xs, Ps, mus, means, position, position_covariance, batches, batch_row
+    )
+
+
+_EMPTY = np.empty(0)

@@ -1,13 +1,27 @@
-"""Merging, pruning and normalising hypotheses (paper 002 III-D, eq. (3); paper 000 C1)."""
+"""Merging, pruning and normalising hypotheses (paper 002 III-D, eq. (3); paper 000 C1).
+
+Hypotheses are merged by hashing: a hypothesis is identified by the frozen set of
+object versions it holds, so children with the same set meet in one dict entry
+(no pairwise comparison). The per-entry arithmetic is plain ``math`` on floats:
+numpy's per-call cost is larger than the work for a single pair.
+"""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-
-import numpy as np
+from operator import itemgetter
 
 from semwm.mhf.state import Hypothesis
+
+
+def log_add(a: float, b: float) -> float:
+    """``log(exp(a) + exp(b))`` without overflow (``numpy.logaddexp`` for two floats)."""
+    if a < b:
+        a, b = b, a
+    if b == -math.inf:
+        return a
+    return a + math.log1p(math.exp(b - a))
 
 
 def merge(
@@ -20,7 +34,7 @@ def merge(
         if entry is None:
             merged[tracks] = [log_weight, rate]
         else:
-            entry[0] = float(np.logaddexp(entry[0], log_weight))
+            entry[0] = log_add(entry[0], log_weight)
     return merged
 
 
@@ -35,15 +49,12 @@ def prune(
     items = [(lw, tracks, rate) for tracks, (lw, rate) in merged.items() if lw > -math.inf]
     if not items:
         raise ValueError("every hypothesis has zero probability")
-    items.sort(key=lambda item: item[0], reverse=True)
+    items.sort(key=itemgetter(0), reverse=True)
     best = items[0][0]
     if ratio > 0.0:
         floor = best + math.log(ratio)
         items = [item for item in items if item[0] >= floor]
     del items[max_hypotheses:]
-    if len(items) <= 32:  # small sets: plain floats beat numpy's per-call cost
-        log_total = best + math.log(math.fsum(math.exp(item[0] - best) for item in items))
-    else:
-        weights = np.fromiter((item[0] for item in items), dtype=float, count=len(items))
-        log_total = best + math.log(float(np.exp(weights - best).sum()))
-    return tuple(Hypothesis(lw - log_total, tracks, rate) for lw, tracks, rate in items)
+    exp = math.exp
+    log_total = best + math.log(math.fsum([exp(lw - best) for lw, _, _ in items]))
+    return tuple([Hypothesis(lw - log_total, tracks, rate) for lw, tracks, rate in items])

@@ -1,0 +1,440 @@
+"""Speed of the in-process core (issue 10): a profile-driven report, before and after.
+
+One command measures, in one run and on the same data:
+
+* the current core (this checkout) and a baseline core (``--baseline REF``, default
+  ``main``: the commit where this checkout left that ref, ``git merge-base REF HEAD``,
+  exported to a temporary folder and imported in a subprocess in place of this
+  checkout's ``semwm``), each on
+  - sim2 and robocup (2 s), seed 0: CPU µs per detection of the ingest calls
+    (``time.process_time``; the best of ``--repeats`` runs) and wall µs per detection
+    as the runner reports it (``semwm.sim.runner.run_scenario``, the measure every
+    tracker gets in ``bench_trackers.py``);
+  - a cProfile of the robocup ingest calls: Python calls per detection and the top
+    functions by own time;
+  - the static grid (``bench_scaling.grid_size``) of N = 50, 100, 1000 objects: CPU ms per
+    frame, µs per detection (best of the repeats), ``tracemalloc`` peak over 3 frames;
+* Stone Soup JPDA on sim2 and robocup, timed the same two ways.
+
+The runs of the scenarios are interleaved (baseline, current, JPDA, and again), so
+that all three see the same load on a shared machine: compare the ratios, measured
+side by side, rather than absolute times across days.
+
+Writes ``speed.json`` and ``speed.md`` to ``benchmarks/out/`` (``benchmarks/results/``
+with ``--update-results``).
+
+    python benchmarks/bench_speed.py [--quick] [--baseline REF|none] [--update-results]
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import json
+import os
+import pstats
+import subprocess
+import sys
+import tarfile
+import tempfile
+import time
+import tracemalloc
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from baselines import RESULTS, add_output_arguments, fmt, machine_info, write_results
+
+SCENARIOS: dict[str, dict[str, Any]] = {"sim2": {}, "robocup": {"duration": 2.0}}
+GRID_SIZES = (50, 100, 1000)
+QUICK_GRID_SIZES = (50, 100)
+TOP = 12
+CHANGES = (
+    "Hypotheses: log-sum-exp of two floats in `math` (merge called `numpy.logaddexp` per "
+    "duplicate child); one birth lookup and one label check per hypothesis in `_expand` "
+    "(was a numpy call and a set intersection per child); births found in a set (was a "
+    "scan of every birth of the scan per birth: quadratic in the grid); a cluster with "
+    "nothing in common is not re-merged by `_split`; cluster products skip combinations "
+    "below eq. (3)'s floor before building their sets; prune sorts with a C key.",
+    "Filters: closed-form 2x2 inverse, determinant, Mahalanobis distance and largest "
+    "eigenvalue (`semwm/filters/small.py`) instead of `numpy.linalg` (tens of µs per call "
+    "for tiny stacks); F(dt), Q(dt) as polynomials with coefficients cached per class "
+    "filter (were rebuilt mode by mode, then stacked); a one-mode update skips the mode "
+    "mixture.",
+    "Association: predictions keep their per-class stacked arrays (updates index them "
+    "instead of `np.stack` per row); a new object's class distribution once per (detector, "
+    "class); label pairs and appearance distances without a Python loop over every "
+    "(detection, object) pair; one list conversion per batch for the updated versions; "
+    "inside-region probabilities once per prediction.",
+    "World: stored positions and inside-region probabilities computed once per version "
+    "(versions are immutable), and the published existence sums each version's mass once "
+    "per cluster.",
+)
+
+
+# --------------------------------------------------------------------- one core
+
+
+def _scenario(name: str) -> tuple[Any, Any]:
+    from semwm.knowledge.loader import load_knowledge
+    from semwm.knowledge.shipped import shipped_knowledge_path
+    from semwm.sim.scenarios import make_scenario
+
+    scenario = make_scenario(name, 0, **SCENARIOS[name])
+    return scenario, load_knowledge(shipped_knowledge_path(scenario.knowledge_file))
+
+
+class _CpuTimed:
+    """A tracker whose ``ingest`` calls are timed in CPU seconds (``process_time``),
+    optionally under a profiler; everything else is delegated."""
+
+    def __init__(self, tracker: Any, profile: cProfile.Profile | None = None) -> None:
+        self._tracker = tracker
+        self._profile = profile
+        self.cpu_s = 0.0
+
+    def ingest(self, scan: Any) -> Any:
+        if self._profile is not None:
+            self._profile.enable()
+        start = time.process_time()
+        try:
+            return self._tracker.ingest(scan)
+        finally:
+            self.cpu_s += time.process_time() - start
+            if self._profile is not None:
+                self._profile.disable()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._tracker, name)
+
+
+def _timed_run(
+    name: str, tracker: str = "semwm", profile: cProfile.Profile | None = None
+) -> dict[str, Any]:
+    """One run of a tracker on a scenario: CPU of its ingest calls, and the runner's wall."""
+    from semwm.sim.runner import run_scenario
+    from semwm.world import WorldModel
+
+    scenario, knowledge = _scenario(name)
+    if tracker == "semwm":
+        WorldModel(knowledge)  # lazy imports outside the measured calls
+        build: Any = WorldModel
+    else:
+        from baselines import StoneSoupTracker, tuning_from_knowledge
+        from bench_trackers import FULL, _area
+
+        rate = FULL[name][1]
+        tuning = tuning_from_knowledge(knowledge, scan_rate=rate, area=_area(scenario.region))
+        mode = tracker.removeprefix("stonesoup_")
+
+        def build(k: Any) -> Any:
+            return StoneSoupTracker(tuning, mode, time_limit=600.0)
+
+    timed: list[_CpuTimed] = []
+
+    def factory(k: Any) -> Any:
+        timed.append(_CpuTimed(build(k), profile))
+        return timed[-1]
+
+    result = run_scenario(scenario, knowledge, progress=False, world_model_factory=factory)
+    n = result.n_detections
+    return {
+        "detections": n,
+        "cpu_us_per_detection": timed[0].cpu_s / n * 1e6,
+        "wall_us_per_detection": result.metrics.time_per_detection["mean_s"] * 1e6,
+        "gospa": result.metrics.gospa.total,
+        "id_switches": result.metrics.id_switches,
+    }
+
+
+def _best_grid(rows: tuple[dict[str, Any], ...]) -> dict[str, Any]:
+    """The repeat of one grid size with the lowest CPU per frame."""
+    done = [r for r in rows if r["ms_per_frame"] is not None]
+    return min(done, key=lambda r: r["ms_per_frame"]) if done else rows[0]
+
+
+def _best(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    return {
+        "detections": runs[0]["detections"],
+        "cpu_us_per_detection": min(r["cpu_us_per_detection"] for r in runs),
+        "wall_us_per_detection": min(r["wall_us_per_detection"] for r in runs),
+        "gospa": runs[0]["gospa"],
+        "id_switches": runs[0]["id_switches"],
+    }
+
+
+def _profile(name: str) -> dict[str, Any]:
+    profile = cProfile.Profile()
+    run = _timed_run(name, "semwm", profile)
+    stats = pstats.Stats(profile, stream=io.StringIO())
+    rows = []
+    for (path, line, function), (_, calls, own, cumulative, _) in stats.stats.items():  # type: ignore[attr-defined]
+        rows.append(
+            {
+                "function": f"{_short(path)}:{line}({function})",
+                "calls": calls,
+                "own_s": own,
+                "cumulative_s": cumulative,
+            }
+        )
+    rows.sort(key=lambda r: -r["own_s"])
+    total_calls = sum(r["calls"] for r in rows)
+    total_own = sum(r["own_s"] for r in rows)
+    return {
+        "scenario": name,
+        "detections": run["detections"],
+        "calls_per_detection": total_calls / run["detections"],
+        "profiled_s": total_own,
+        "top_own_time": rows[:TOP],
+    }
+
+
+def _short(path: str) -> str:
+    for marker in ("site-packages/", "/semwm/", "lib/python3"):
+        if marker in path:
+            tail = path.split(marker, 1)[1]
+            return ("semwm/" + tail) if marker == "/semwm/" else tail
+    return path
+
+
+def _grid(n: int) -> dict[str, Any]:
+    import bench_scaling
+
+    frames_ok = bench_scaling.grid_size(n, size_limit=60.0, warmup=10, timed=10)
+    return {
+        "n": n,
+        "status": frames_ok["status"],
+        "ms_per_frame": frames_ok["steady_cpu_ms_per_frame"],
+        "us_per_detection": frames_ok["steady_cpu_us_per_detection"],
+        "peak_traced_mb": frames_ok["peak_traced_mb_steady_frames"],
+        "hypotheses": frames_ok["hypotheses_last"],
+        "objects": frames_ok["objects_last"],
+    }
+
+
+def measure_core(part: str, grid_sizes: tuple[int, ...]) -> dict[str, Any]:
+    """One part (``scenarios``: one run of each; ``profile``; ``grid``) measured of the
+    ``semwm`` this interpreter imports."""
+    import semwm
+
+    result: dict[str, Any] = {"semwm_path": str(Path(semwm.__file__).resolve().parent)}
+    if part == "scenarios":
+        result["scenarios"] = {name: _timed_run(name) for name in SCENARIOS}
+    elif part == "profile":
+        result["profile"] = _profile("robocup")
+    else:
+        result["grid"] = [_grid(n) for n in grid_sizes]
+    return result
+
+
+# --------------------------------------------------------------------- peers, driver
+
+
+def _core_in_subprocess(source: Path, part: str, grid_sizes: tuple[int, ...]) -> dict[str, Any]:
+    """:func:`measure_core` with ``source`` (a checkout's root) first on the path."""
+    with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as handle:
+        target = Path(handle.name)
+    env = {**os.environ, "PYTHONPATH": str(source)}
+    subprocess.run(
+        [
+            sys.executable,
+            str(Path(__file__).resolve()),
+            "--measure-core",
+            str(target),
+            "--part",
+            part,
+            "--grid",
+            *map(str, grid_sizes),
+        ],
+        check=True,
+        env=env,
+    )
+    result: dict[str, Any] = json.loads(target.read_text())
+    target.unlink()
+    return result
+
+
+def _export(ref: str, folder: Path) -> str:
+    """The tree of the commit where this checkout left ``ref`` (``git merge-base ref HEAD``)
+    into ``folder``; returns that commit."""
+    root = Path(__file__).resolve().parents[1]
+    commit = subprocess.run(
+        ["git", "merge-base", ref, "HEAD"], capture_output=True, text=True, check=True, cwd=root
+    ).stdout.strip()
+    archive = subprocess.run(
+        ["git", "archive", "--format=tar", commit], capture_output=True, check=True, cwd=root
+    ).stdout
+    with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+        tar.extractall(folder, filter="data")
+    return commit
+
+
+def run(quick: bool, baseline: str, repeats: int) -> dict[str, Any]:
+    grid_sizes = QUICK_GRID_SIZES if quick else GRID_SIZES
+    root = Path(__file__).resolve().parents[1]
+    doc: dict[str, Any] = {
+        "benchmark": "speed",
+        "quick": quick,
+        "machine": machine_info(),
+        "repeats": repeats,
+        "changes": list(CHANGES),
+        "scenarios": {name: sizes for name, sizes in SCENARIOS.items()},
+        "notes": [
+            "cpu: time.process_time around WorldModel.ingest; wall: the runner's perf_counter "
+            "of the ingest calls (the measure bench_trackers gives every tracker); best of "
+            "the repeats.",
+            "Runs interleaved: baseline core, current core, Stone Soup JPDA, repeated; each "
+            "figure is the best of the repeats (the run least disturbed by other load).",
+            "grid: bench_scaling.grid_size with 10 warm-up and 10 timed frames; peak: "
+            "tracemalloc over 3 frames after the timed ones.",
+        ],
+    }
+    cores = {"current": root}
+    with tempfile.TemporaryDirectory() as folder:
+        if baseline != "none":
+            commit = _export(baseline, Path(folder))
+            cores["baseline"] = Path(folder)
+            doc["baseline"] = {"ref": baseline, "commit": commit}
+        doc["current"] = {}
+        # repeats interleaved (baseline, JPDA, current), so that all three see the same load
+        runs: dict[str, list[dict[str, Any]]] = {}
+        grids: dict[str, list[list[dict[str, Any]]]] = {label: [] for label in cores}
+        for repeat in range(repeats):
+            for label in [*cores, "stonesoup_jpda"]:
+                print(f"run {repeat + 1}/{repeats}: {label} ...", flush=True)
+                if label == "stonesoup_jpda":
+                    one = {name: _timed_run(name, label) for name in SCENARIOS}
+                else:
+                    one = _core_in_subprocess(cores[label], "scenarios", grid_sizes)["scenarios"]
+                    grids[label].append(
+                        _core_in_subprocess(cores[label], "grid", grid_sizes)["grid"]
+                    )
+                for name, values in one.items():
+                    runs.setdefault(f"{label}/{name}", []).append(values)
+        doc["stonesoup_jpda"] = {name: _best(runs[f"stonesoup_jpda/{name}"]) for name in SCENARIOS}
+        for label, source in cores.items():
+            doc[label]["scenarios"] = {name: _best(runs[f"{label}/{name}"]) for name in SCENARIOS}
+            doc[label]["grid"] = [_best_grid(rows) for rows in zip(*grids[label], strict=True)]
+            print(f"{label}: profile ...", flush=True)
+            measured = _core_in_subprocess(source, "profile", grid_sizes)
+            doc[label]["profile"] = measured["profile"]
+            doc[label]["semwm_path"] = measured["semwm_path"]
+    return doc
+
+
+# --------------------------------------------------------------------- report
+
+
+def _ratio(a: float | None, b: float | None) -> float | None:
+    return a / b if a is not None and b else None
+
+
+def markdown(doc: dict[str, Any]) -> str:
+    m = doc["machine"]
+    current, jpda = doc["current"], doc["stonesoup_jpda"]
+    base = doc.get("baseline")
+    lines = [
+        "# Speed of the core: before and after (issue 10)",
+        "",
+        f"Machine: {m['platform']}, {m['cpu_count']} CPUs ({m.get('processor') or '?'}), "
+        f"Python {m['python']}, {m['date']}; versions: "
+        + ", ".join(f"{k} {v}" for k, v in m["versions"].items()),
+        "",
+        f"Current: commit {str(m.get('commit'))[:10]}"
+        + (f"; baseline: {base['ref']} ({base['commit'][:10]})" if base else "")
+        + f"; best of {doc['repeats']} runs{' (quick)' if doc['quick'] else ''}. "
+        + " ".join(doc["notes"]),
+        "",
+        "## What changed",
+        "",
+        *[f"* {change}" for change in doc.get("changes", CHANGES)],
+        "",
+        "## Per detection, side by side with Stone Soup JPDA",
+        "",
+        "| scenario | detections | core | semwm CPU µs/det | JPDA CPU µs/det "
+        "| JPDA / semwm (CPU) | semwm wall µs/det | JPDA wall µs/det | JPDA / semwm (wall) "
+        "| GOSPA | ID sw |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, sizes in doc["scenarios"].items():
+        cores = [("baseline", base)] if base else []
+        cores.append(("current", current))
+        j = jpda[name]
+        for label, core in cores:
+            s = core["scenarios"][name]
+            lines.append(
+                f"| {name} {sizes or ''} | {s['detections']} | {label} | "
+                f"{fmt(s['cpu_us_per_detection'])} | {fmt(j['cpu_us_per_detection'])} | "
+                f"{fmt(_ratio(j['cpu_us_per_detection'], s['cpu_us_per_detection']))} | "
+                f"{fmt(s['wall_us_per_detection'])} | {fmt(j['wall_us_per_detection'])} | "
+                f"{fmt(_ratio(j['wall_us_per_detection'], s['wall_us_per_detection']))} | "
+                f"{fmt(s['gospa'])} | {s['id_switches']} |"
+            )
+    lines += [
+        "",
+        "## Static grid (all N objects detected every frame, 10 Hz)",
+        "",
+        "| N | core | CPU ms/frame | µs/det | peak MB | hypotheses | objects | status |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for row, g in enumerate(current["grid"]):
+        cores = [("baseline", base["grid"][row])] if base else []
+        cores.append(("current", g))
+        for label, c in cores:
+            lines.append(
+                f"| {c['n']} | {label} | {fmt(c['ms_per_frame'])} | "
+                f"{fmt(c['us_per_detection'])} | {fmt(c['peak_traced_mb'])} | "
+                f"{c['hypotheses']} | {c['objects']} | {c['status']} |"
+            )
+    for label, core in ([("baseline", base)] if base else []) + [("current", current)]:
+        p = core["profile"]
+        lines += [
+            "",
+            f"## Where the time goes: {label} core, cProfile of {p['scenario']} ingest",
+            "",
+            f"{p['detections']} detections, {fmt(p['calls_per_detection'])} Python calls per "
+            f"detection, {fmt(p['profiled_s'])} s under the profiler.",
+            "",
+            "| function | calls | own s | cumulative s |",
+            "|---|---|---|---|",
+        ]
+        for r in p["top_own_time"]:
+            lines.append(
+                f"| `{r['function']}` | {r['calls']} | {fmt(r['own_s'])} | "
+                f"{fmt(r['cumulative_s'])} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="grid N = 50, 100 only")
+    parser.add_argument(
+        "--baseline",
+        default="main",
+        help="git ref of the core to compare with, or 'none' (default: main)",
+    )
+    parser.add_argument("--repeats", type=int, default=3, help="runs per measure (best kept)")
+    parser.add_argument("--measure-core", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--part", default="scenarios", help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--grid", type=int, nargs="*", default=list(GRID_SIZES), help=argparse.SUPPRESS
+    )
+    add_output_arguments(parser)
+    args = parser.parse_args(argv)
+    if args.measure_core is not None:
+        tracemalloc.stop()
+        result = measure_core(args.part, tuple(args.grid))
+        args.measure_core.write_text(json.dumps(result, indent=2) + "\n")
+        return 0
+    doc = run(args.quick, args.baseline, args.repeats)
+    write_results(
+        RESULTS, "speed", doc, markdown(doc), args.quick, update_results=args.update_results
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
