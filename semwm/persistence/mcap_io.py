@@ -22,6 +22,7 @@ Needs the ``mcap`` package (``pip install "semwm[mcap]"``).
 from __future__ import annotations
 
 import json
+import struct
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -362,7 +363,7 @@ def read_recording(path: Path, report: ReadReport | None = None) -> Iterator[Rec
                         yield Record(item.sequence, "batch", payload)
                     else:
                         yield Record(item.sequence, data["kind"], data["payload"])
-        except (McapError, EOFError, ValueError, KeyError) as error:
+        except (McapError, EOFError, ValueError, KeyError, struct.error) as error:
             report.problem = (
                 f"{path}: recording ends early after {report.records} change(s) "
                 f"({type(error).__name__}: {error}); read up to there"

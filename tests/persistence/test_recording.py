@@ -12,7 +12,8 @@ from api.app import create_app
 from api.settings import Settings
 from semwm.cli import main
 from semwm.knowledge.shipped import shipped_knowledge_path
-from semwm.persistence.mcap_io import TOPICS, recording_summary
+from semwm.persistence.mcap_io import TOPICS, read_recording, recording_summary
+from semwm.persistence.records import ReadReport
 
 SIM1 = shipped_knowledge_path("sim1.yaml")
 
@@ -52,6 +53,21 @@ def test_a_recording_cut_short_replays_up_to_its_last_whole_message(
     metrics = json.loads((tmp_path / "rep" / "metrics.json").read_text())
     assert metrics["tail_problem"] and "ends early" in metrics["tail_problem"]
     assert metrics["batches"] > 0
+
+
+def test_a_recording_cut_anywhere_reads_up_to_its_last_whole_message(
+    recording: Path, tmp_path: Path
+) -> None:
+    """Power loss can cut the file at any byte: reading stops with a report, never raises."""
+    data = recording.read_bytes()
+    whole = len(list(read_recording(recording)))
+    cut = tmp_path / "cut.mcap"
+    for end in range(0, len(data), max(len(data) // 200, 1)):
+        cut.write_bytes(data[:end])
+        report = ReadReport()
+        read = list(read_recording(cut, report))
+        assert len(read) <= whole
+        assert report.problem is not None, end
 
 
 def test_serve_records_and_journals_what_it_acknowledges(tmp_path: Path) -> None:
