@@ -25,9 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import re
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -35,6 +32,7 @@ from typing import Any
 
 import httpx
 import numpy as np
+from bench_soak import launch, rss_mib
 from tqdm import tqdm
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,32 +42,6 @@ SCAN_HZ = 10.0
 P_DETECT = 0.9
 NOISE = 0.05
 CLUTTER_PER_SCAN = 0.05  # sim1.yaml camera clutter_frequency 0.5 Hz at 10 Hz
-_LISTENING = re.compile(r"Uvicorn running on (http://127\.0\.0\.1:\d+)")
-
-
-def rss_mib(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
-
-
-def start_server(log: Path) -> tuple[subprocess.Popen[bytes], str]:
-    command = [
-        sys.executable, "-m", "semwm.cli", "serve", "--knowledge", "knowledge/sim1.yaml",
-        "--port", "0", "--log-level", "info",
-    ]  # fmt: skip
-    with log.open("w") as out:
-        process = subprocess.Popen(command, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT)
-    deadline = time.monotonic() + 60
-    while True:
-        found = _LISTENING.search(log.read_text())
-        if found:
-            return process, found.group(1)
-        if process.poll() is not None or time.monotonic() > deadline:
-            process.kill()
-            raise SystemExit(f"server did not start:\n{log.read_text()}")
-        time.sleep(0.1)
 
 
 class Table:
@@ -110,7 +82,7 @@ def run(seconds: float, present: int, seed: int) -> dict[str, Any]:
     table = Table(present, rng)
     minutes: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        process, url = start_server(Path(tmp) / "server.log")
+        process, url = launch([], Path(tmp) / "server.log")
         try:
             with httpx.Client(base_url=url, timeout=60) as client:
                 latencies: list[float] = []

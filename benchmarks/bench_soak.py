@@ -43,10 +43,19 @@ def rss_mib(pid: int) -> float:
 
 
 def start_server(data_dir: Path, sync: str, log: Path) -> tuple[subprocess.Popen[bytes], str]:
+    return launch(
+        ["--data-dir", str(data_dir), "--sync", sync, "--reorder-window", "1.0",
+         "--compact-every", "20000"],
+        log,
+    )  # fmt: skip
+
+
+def launch(options: list[str], log: Path) -> tuple[subprocess.Popen[bytes], str]:
+    """``semwm serve --knowledge knowledge/sim1.yaml --port 0 OPTIONS`` in its own process;
+    its output goes to ``log``, where the URL it listens on is read."""
     command = [
         sys.executable, "-m", "semwm.cli", "serve", "--knowledge", "knowledge/sim1.yaml",
-        "--port", "0", "--data-dir", str(data_dir), "--sync", sync, "--log-level", "info",
-        "--reorder-window", "1.0", "--compact-every", "20000",
+        "--port", "0", "--log-level", "info", *options,
     ]  # fmt: skip
     with log.open("w") as out:
         process = subprocess.Popen(command, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT)
