@@ -1,0 +1,169 @@
+"""A team's load (issue 15 defect 6): 5 robots x 10 detections x 30 Hz on 20 shared objects.
+
+Run: ``python benchmarks/bench_teamload.py [--seconds 60] [--out FILE]``
+
+A real ``semwm serve --knowledge knowledge/sim1.yaml`` in its own process on a
+loopback port (:func:`bench_soak.launch`). Twenty static objects (cups and coke
+cans on a 5 x 4 grid, 0.7 m apart); each of 5 robots sees 10 of them, overlapping
+its neighbours' (robot i: objects 2i .. 2i + 9, mod 20), and posts one batch of
+those 10 detections (5 cm noise, its own source, wall-clock stamps) every 1/30 s
+on a fixed schedule: a robot that falls behind posts at once, so the run takes
+longer than ``--seconds`` when the service cannot keep up. A reader asks for
+``GET /world`` at 10 Hz. Reported: detections offered and processed per second,
+how far behind schedule the robots ended, POST and GET latency p50/p99, errors,
+and the objects published at the end against the 20 real ones. The issue's
+target: keeps up in real time (processed = offered) with POST p99 < 50 ms.
+Writes JSON to ``--out`` (default ``benchmarks/out/teamload.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+from bench_soak import launch
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOTS = 5
+PER_BATCH = 10
+RATE_HZ = 30.0
+READER_HZ = 10.0
+NOISE = 0.05
+OBJECTS = [
+    ("Cup" if (i + j) % 2 else "CokeCan", (0.6 + 0.7 * i, 0.45 + 0.7 * j))
+    for i in range(5)
+    for j in range(4)
+]
+
+
+def robot(index: int, url: str, seconds: float, out: dict[str, Any], start: float) -> None:
+    rng = np.random.default_rng(index)
+    seen = [OBJECTS[(2 * index + k) % len(OBJECTS)] for k in range(PER_BATCH)]
+    period = 1.0 / RATE_HZ
+    ticks = int(seconds * RATE_HZ)
+    latencies: list[float] = []
+    applied = errors = 0
+    with httpx.Client(base_url=url, timeout=30) as client:
+        for tick in range(ticks):
+            delay = start + tick * period - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            now = time.time()
+            noise = rng.normal(0.0, NOISE, size=(PER_BATCH, 2))
+            batch = [
+                {"time": now, "class": cls, "source": f"r{index}",
+                 "position": [x + noise[k, 0], y + noise[k, 1]]}
+                for k, (cls, (x, y)) in enumerate(seen)
+            ]  # fmt: skip
+            sent = time.perf_counter()
+            try:
+                response = client.post("/detections", json={"detections": batch})
+                if response.status_code == 200:
+                    applied += response.json()["applied"]
+                else:
+                    errors += 1
+            except httpx.TransportError:
+                errors += 1
+            latencies.append(time.perf_counter() - sent)
+    out[f"r{index}"] = {
+        "latencies": latencies,
+        "applied": applied,
+        "errors": errors,
+        "behind_s": max(time.monotonic() - (start + ticks * period), 0.0),
+    }
+
+
+def reader(url: str, until: threading.Event, out: dict[str, Any]) -> None:
+    latencies: list[float] = []
+    with httpx.Client(base_url=url, timeout=30) as client:
+        while not until.is_set():
+            sent = time.perf_counter()
+            client.get("/world")
+            latencies.append(time.perf_counter() - sent)
+            time.sleep(max(1.0 / READER_HZ - (time.perf_counter() - sent), 0.0))
+    out["reader"] = latencies
+
+
+def percentiles(values: list[float]) -> dict[str, float]:
+    ms = np.asarray(values) * 1e3
+    return {
+        "p50": round(float(np.percentile(ms, 50)), 2),
+        "p99": round(float(np.percentile(ms, 99)), 2),
+    }
+
+
+def run(seconds: float) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory() as tmp:
+        process, url = launch(["--reorder-window", "1.0"], Path(tmp) / "server.log")
+        try:
+            results: dict[str, Any] = {}
+            done = threading.Event()
+            start = time.monotonic() + 0.5
+            robots = [
+                threading.Thread(target=robot, args=(i, url, seconds, results, start))
+                for i in range(ROBOTS)
+            ]
+            watcher = threading.Thread(target=reader, args=(url, done, results))
+            watcher.start()
+            for thread in robots:
+                thread.start()
+            for thread in robots:
+                thread.join()
+            done.set()
+            watcher.join()
+            wall = time.monotonic() - start
+            world = httpx.get(f"{url}/world", timeout=30).json()
+        finally:
+            process.terminate()
+            process.wait(10)
+    posts = [v for r in range(ROBOTS) for v in results[f"r{r}"]["latencies"]]
+    applied = sum(results[f"r{r}"]["applied"] for r in range(ROBOTS))
+    offered = ROBOTS * PER_BATCH * RATE_HZ
+    processed = applied / wall
+    post = percentiles(posts)
+    return {
+        "benchmark": "teamload",
+        "machine": f"{platform.platform()}, {platform.processor() or platform.machine()}",
+        "python": platform.python_version(),
+        "sizes": {
+            "robots": ROBOTS,
+            "per_batch": PER_BATCH,
+            "rate_hz": RATE_HZ,
+            "objects": len(OBJECTS),
+            "seconds": seconds,
+        },
+        "offered_det_per_s": offered,
+        "processed_det_per_s": round(processed, 1),
+        "wall_s": round(wall, 1),
+        "behind_schedule_s": round(max(results[f"r{r}"]["behind_s"] for r in range(ROBOTS)), 2),
+        "post_ms": post,
+        "get_world_ms": percentiles(results["reader"]),
+        "errors": sum(results[f"r{r}"]["errors"] for r in range(ROBOTS)),
+        "objects_published": len(world["objects"]),
+        "objects_real": len(OBJECTS),
+        "target_met": bool(processed >= 0.98 * offered and post["p99"] < 50.0),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "teamload.json")
+    args = parser.parse_args()
+    result = run(args.seconds)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    print(json.dumps({k: v for k, v in result.items() if k != "machine"}, indent=2))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
