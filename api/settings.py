@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import ipaddress
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -90,6 +91,9 @@ class Settings(BaseSettings):
         A connection must send a request's complete headers within this many
         seconds of opening (or of the previous response), else it is closed: idle
         or byte-by-byte (slowloris) clients cannot fill ``limit_concurrency``.
+    http
+        uvicorn's HTTP/1.1 implementation: ``httptools`` (C parser, less CPU per
+        request), ``h11`` (pure Python), or ``auto``: httptools when installed.
     mqtt, mqtt_prefix, mqtt_world_rate, mqtt_client_id
         Join the MQTT broker at ``mqtt://HOST:PORT`` (see docs/mqtt.md): detections
         in on ``<prefix>/detections/<source>``, the world out on ``<prefix>/world`` at
@@ -129,6 +133,7 @@ class Settings(BaseSettings):
     timeout_keep_alive: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 5.0
     limit_concurrency: Annotated[int, Field(ge=1)] = 256
     timeout_request: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 10.0
+    http: Literal["auto", "h11", "httptools"] = "auto"
 
     @model_validator(mode="after")
     def _read_token_file(self) -> Settings:
@@ -163,7 +168,7 @@ class Settings(BaseSettings):
             "timeout_keep_alive": self.timeout_keep_alive,
             "limit_concurrency": self.limit_concurrency,
             "h11_max_incomplete_event_size": 64 * 1024,
-            "http": with_header_deadline(self.timeout_request),
+            "http": with_header_deadline(self.timeout_request, self.http),
         }
 
     def bind_problem(self) -> str | None:
@@ -180,6 +185,13 @@ class Settings(BaseSettings):
     mqtt_prefix: str = "semwm"
     mqtt_world_rate: Annotated[float, Field(gt=0.0)] = 10.0
     mqtt_client_id: Annotated[str | None, Field(min_length=1)] = None
+
+    @field_validator("http")
+    @classmethod
+    def _http_installed(cls, value: str) -> str:
+        if value == "httptools" and importlib.util.find_spec("httptools") is None:
+            raise ValueError("http 'httptools' needs the httptools package: pip install httptools")
+        return value
 
     @field_validator("mqtt")
     @classmethod

@@ -6,7 +6,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
-from pydantic import ValidationError
+from pydantic import TypeAdapter, ValidationError
 
 from semwm.detection import Detection, DetectionError, DetectionProblem
 from semwm.filters.factory import FilterFactory
@@ -23,8 +23,21 @@ def as_batch(detections: DetectionInput | Iterable[DetectionInput]) -> list[Dete
     return list(detections)
 
 
+_DETECTIONS: TypeAdapter[list[Detection]] = TypeAdapter(list[Detection])
+
+
 def parse(batch: list[DetectionInput]) -> list[Detection]:
-    """Parse dicts into :class:`Detection` values; every problem is collected."""
+    """Parse dicts into :class:`Detection` values; every problem is collected.
+
+    A batch of several is validated in one call (``Detection`` values pass through
+    as they are); only a batch with a problem is walked again one item at a time, to
+    report each problem with its index and field.
+    """
+    if len(batch) > 1:
+        try:
+            return _DETECTIONS.validate_python(batch)
+        except ValidationError:
+            pass  # find every problem, with its index, below
     problems: list[DetectionProblem] = []
     parsed: list[Detection] = []
     for index, item in enumerate(batch):
