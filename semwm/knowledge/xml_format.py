@@ -44,6 +44,7 @@ from typing import Any
 from lxml import etree
 
 from semwm.knowledge.model import (
+    CATEGORY_FIELDS,
     ClassSpec,
     IMMFilterSpec,
     KalmanFilterSpec,
@@ -93,17 +94,7 @@ _CLASS_SCALARS = (
     "max_time_without_update",
     "leave_frequency",
     "category",
-    "velocity_decay",
-    "confidence_decay",
-    "confidence_decay_distance",
-    "looking_decay",
-    "suspicious_confidence",
-    "invalid_confidence",
-    "detection_probability",
-    "kick_probability",
-    "kick_speed_spread",
-    "kick_direction_spread",
-    "trust_labels",
+    *CATEGORY_FIELDS,
 )
 _CLASS_MATRICES = ("measurement_noise", "initial_covariance", "initial_velocity_covariance")
 _OBJECT_CHILDREN = (
