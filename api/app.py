@@ -25,6 +25,7 @@ from api.guard import RequestGuard
 from api.logs import RequestIdMiddleware
 from api.metrics import DetectionMetricsMiddleware, Metrics
 from api.offline_docs import install_offline_docs
+from api.openapi_links import add_links, operation_id
 from api.persistence import attach_persistence
 from api.routes import (
     actions,
@@ -99,6 +100,7 @@ def create_app(settings: Settings) -> FastAPI:
         lifespan=lifespan,
         docs_url=None,
         redoc_url=None,
+        generate_unique_id_function=operation_id,
     )
     app.state.settings = settings
     app.state.feed = None
@@ -138,6 +140,7 @@ def create_app(settings: Settings) -> FastAPI:
                 routes=app.routes,
             )
             _add_schemas(schema, (DetectionIn, DetectionBatch))
+            add_links(schema)
             app.openapi_schema = schema
         return app.openapi_schema
 
