@@ -240,7 +240,7 @@ class WorldModel:
             referenced: set[int] = set().union(*(c.keys for c in clusters))
             tracks = {k: state.tracks[k] for k in referenced}
             existence = {k: state.existence.get(k, 1.0) for k in referenced}
-            self._state = MHFState(clusters, tracks, state.time, state.next_key, existence)
+            self._state = replace(state, clusters=clusters, tracks=tracks, existence=existence)
         self._published = {
             i: p for i, p in self._published.items() if p.track.cls in knowledge.classes
         }
@@ -950,7 +950,7 @@ def _remap_classes(state: MHFState, old: tuple[str, ...], new: tuple[str, ...]) 
         return replace(track, class_probs=probs / total)
 
     tracks = {key: remap(track) for key, track in state.tracks.items()}
-    return MHFState(state.clusters, tracks, state.time, state.next_key, state.existence)
+    return replace(state, tracks=tracks)
 
 
 def _unique_labels(objects: list[WorldObject]) -> list[WorldObject]:

@@ -126,6 +126,17 @@ class WorldSettings(Frozen):
         ``mht`` only: an object that goes undetected while it could be seen loses
         existence (rate f_existing: P(no detection in dt | exists) = exp(-f dt)).
         ``false`` reproduces paper 002's behaviour, where only P_max removes objects.
+    observed_detection_rates
+        ``mht`` only: an object's detection rate is the larger of its class's
+        ``detection_frequency`` and the rate at which the sources that see it are
+        observed to report it (a team of robots reporting at 30 Hz each detects an
+        object far more often than one camera; :mod:`semwm.mhf.rates`). ``false``
+        uses the class's rate only.
+    merge_distance
+        ``mht`` only: two hypotheses holding the same objects merge when every object
+        they hold differently has estimates within this squared Mahalanobis distance
+        (and the same class, label, existence; :mod:`semwm.mhf.similar`): twins that
+        differ in how one old detection was explained. 0 keeps them apart (paper 002).
     min_existence
         ``mht`` only: the world lists objects whose existence probability is at least
         this (queries may ask for another threshold).
@@ -162,6 +173,8 @@ class WorldSettings(Frozen):
     max_hypotheses: Annotated[int, Field(ge=1, le=MAX_HYPOTHESES)] = 1000
     association_model: Literal["paper", "mht"] = "mht"
     missed_detection_term: bool = True
+    observed_detection_rates: bool = True
+    merge_distance: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.01
     min_existence: Annotated[float, Field(gt=0.0, le=1.0)] = 0.5
     removal_existence: Annotated[float, Field(gt=0.0, lt=1.0)] = 1e-5
     label_gate: Positive = 2.0

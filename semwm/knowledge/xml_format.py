@@ -77,6 +77,8 @@ _WORLD_FIELDS = (
     "max_hypotheses",
     "association_model",
     "missed_detection_term",
+    "observed_detection_rates",
+    "merge_distance",
     "min_existence",
     "removal_existence",
     "label_gate",
@@ -86,7 +88,12 @@ _WORLD_FIELDS = (
     "region",
     "default_detector",
 )
-_WORLD_TEXTS = ("association_model", "missed_detection_term", "default_detector")
+_WORLD_TEXTS = (
+    "association_model",
+    "missed_detection_term",
+    "observed_detection_rates",
+    "default_detector",
+)
 _CLASS_SCALARS = (
     "detection_frequency",
     "new_frequency",

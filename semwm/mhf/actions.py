@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -137,10 +137,10 @@ def apply_kick(mhf: MultipleHypothesisFilter, state: MHFState, kick: Kick) -> MH
         hypotheses: tuple[Hypothesis, ...] = prune(merge(children), mhf.ratio, mhf.max_hypotheses)
         clusters.extend(mhf._split(hypotheses, tracks))
     referenced: set[int] = set().union(*(c.keys for c in clusters))
-    return MHFState(
-        tuple(clusters),
-        {k: tracks[k] for k in referenced},
-        state.time,
-        next_key,
-        {k: existence.get(k, 1.0) for k in referenced},
+    return replace(
+        state,
+        clusters=tuple(clusters),
+        tracks={k: tracks[k] for k in referenced},
+        next_key=next_key,
+        existence={k: existence.get(k, 1.0) for k in referenced},
     )

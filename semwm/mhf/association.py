@@ -33,7 +33,7 @@ Two association models (``world.association_model``):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -159,12 +159,15 @@ class Associator:
         measurements: Sequence[Measurement],
         new_key: Callable[[], int],
         existence: Sequence[float] = (),
+        detection_rates: Mapping[str, FloatArray] | None = None,
     ) -> list[DetectionOptions]:
         """Every detection's options against the predicted objects; ``existence`` is each
-        predicted object's existence probability (``mht``)."""
+        predicted object's existence probability (``mht``), ``detection_rates`` per
+        detector each predicted object's rate f_e in the weight of that detector's
+        detections (:mod:`semwm.mhf.rates`; default: its class's)."""
         tracks = predicted.tracks
         classes = self.knowledge.classes
-        existing = self._existing(predicted, measurements, new_key, existence)
+        existing = self._existing(predicted, measurements, new_key, existence, detection_rates)
         spread_uniform = -self.log_volume if self.model == "mht" else 0.0
         result = []
         new_states = self._new_states(measurements)
@@ -308,6 +311,7 @@ class Associator:
         measurements: Sequence[Measurement],
         new_key: Callable[[], int],
         existence: Sequence[float] = (),
+        detection_rates: Mapping[str, FloatArray] | None = None,
     ) -> list[dict[int, tuple[Track, float, float]]]:
         """Gate every (detection, object) pair and update the pairs that pass."""
         tracks = predicted.tracks
@@ -398,7 +402,8 @@ class Associator:
                     rate,
                     class_probs,
                 )
-                log_num = _log(old.rate) + math.log(pair_likelihood[row]) + pair_log_lik[row]
+                f_existing = old.rate if detection_rates is None else detection_rates[m.detector][i]
+                log_num = _log(f_existing) + math.log(pair_likelihood[row]) + pair_log_lik[row]
                 if mht:
                     log_num += _log(existence[i]) if existence else 0.0
                     if m.label is not None and old.label not in (None, m.label):

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -38,6 +39,8 @@ from semwm.mhf.existence import looked_at, near_rate, survive
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted, predict_tracks
 from semwm.mhf.prune import log_add, merge, prune
+from semwm.mhf.rates import ObservedRates
+from semwm.mhf.similar import merge_similar
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
 
 
@@ -118,6 +121,8 @@ class MultipleHypothesisFilter:
         # model's normaliser F sums over every object, so it keeps one global cluster
         self.factorised = self.associator.model == "mht"
         self.missed_detections = self.mht and world.missed_detection_term
+        self.observed_rates = self.mht and world.observed_detection_rates
+        self.merge_distance = world.merge_distance if self.mht else 0.0
         self.region = world.region
         self.removal_existence = world.removal_existence if self.mht else 0.0
         self._leave_relations = {
@@ -133,13 +138,20 @@ class MultipleHypothesisFilter:
     def predict(self, state: MHFState, keys: Sequence[int], time: float) -> Predicted:
         return predict_tracks([state.tracks[k] for k in keys], time, self.factory)
 
-    def rates(self, predicted: Predicted) -> tuple[np.ndarray, np.ndarray]:
+    def rates(
+        self,
+        predicted: Predicted,
+        observed: ObservedRates | None = None,
+        start: float = 0.0,
+        end: float = 0.0,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Leave rates mu and detection rates f (Hz) of predicted objects (``mht``).
 
         mu: the class's ``leave_frequency``, or a disappearance relation's rate near its
-        target; f: the class's ``detection_frequency`` times the probability that the
-        object is inside the region (no sensor sees outside it), 0 without the
-        missed-detection term.
+        target; f: the class's ``detection_frequency`` (raised to the rate the sources
+        are observed to report the object at over ``[start, end]``,
+        :mod:`semwm.mhf.rates`) times the probability that the object is inside the
+        region (no sensor sees outside it), 0 without the missed-detection term.
         """
         classes = self.knowledge.classes
         mu = np.array(
@@ -155,8 +167,15 @@ class MultipleHypothesisFilter:
         if not self.missed_detections:
             return mu, np.zeros(len(predicted.tracks))
         inside = predicted.inside_region(self.region)
-        f = np.array([classes[t.cls].detection_frequency for t in predicted.tracks]) * inside
-        return mu, f
+        f = self.class_rates(predicted.tracks)
+        if observed is not None and self.observed_rates:
+            f = observed.over([t.lineage for t in predicted.tracks], f, start, end)
+        return mu, f * inside
+
+    def class_rates(self, tracks: Sequence[Track]) -> np.ndarray:
+        """Each object's class ``detection_frequency`` (Hz)."""
+        classes = self.knowledge.classes
+        return np.array([classes[t.cls].detection_frequency for t in tracks], dtype=float)
 
     def existence_at(
         self, state: MHFState, predicted: Predicted, time: float
@@ -167,7 +186,7 @@ class MultipleHypothesisFilter:
         if not self.mht or state.time is None or time <= state.time or not predicted.tracks:
             keys = [t.key for t in predicted.tracks]
             return dict(zip(keys, r.tolist(), strict=True)), {}
-        mu, f = self.rates(predicted)
+        mu, f = self.rates(predicted, state.observed, state.time, time)
         r_new, log_q = survive(r, mu, f, time - state.time)
         keys = [t.key for t in predicted.tracks]
         return (
@@ -227,7 +246,7 @@ class MultipleHypothesisFilter:
         clusters: Sequence[Cluster] = state.clusters
         if log_q:
             clusters = self.undetected(clusters, log_q, state.tracks)
-        state = MHFState(tuple(clusters), state.tracks, state.time, state.next_key, existence)
+        state = replace(state, clusters=tuple(clusters), existence=existence)
         table = _TrackTable(state)
         gone = self.leaving(predicted, time, existence)
         if gone:
@@ -239,6 +258,7 @@ class MultipleHypothesisFilter:
             measurements,
             table.new_key,
             [existence[t.key] for t in predicted.tracks],
+            self._stream_rates(state.observed, predicted, measurements, time),
         )
         if view is not None and self.mht:
             seen = {k for option in options for k in option.existing}
@@ -262,10 +282,83 @@ class MultipleHypothesisFilter:
             expanded = self._expand(merged, option, table)
             book.put(self._split(expanded, table.tracks))
         final = book.clusters()
+        if self.merge_distance > 0.0:
+            final = self._merge_similar(final, table)
         referenced: set[int] = set().union(*(c.keys for c in final))
         tracks = {k: table.tracks[k] for k in referenced}
         kept = {k: table.existence.get(k, 1.0) for k in referenced}
-        return MHFState(final, tracks, time, table.next_key, kept)
+        observed = state.observed
+        if self.observed_rates and measurements:
+            observed = self._observe(observed, state.tracks, options, final, table, time)
+        return MHFState(final, tracks, time, table.next_key, kept, observed)
+
+    def _merge_similar(
+        self, clusters: Sequence[Cluster], table: _TrackTable
+    ) -> tuple[Cluster, ...]:
+        """Clusters with hypotheses that differ only in near-identical versions of their
+        objects merged (:mod:`semwm.mhf.similar`)."""
+        result = []
+        for cluster in clusters:
+            if len(cluster.hypotheses) > 1:
+                merged = merge_similar(
+                    cluster.hypotheses, table.tracks, table.existence, self.merge_distance
+                )
+                if len(merged) < len(cluster.hypotheses):
+                    cluster = Cluster.of(merged)
+            result.append(cluster)
+        return tuple(result)
+
+    def _stream_rates(
+        self,
+        observed: ObservedRates,
+        predicted: Predicted,
+        measurements: Sequence[Measurement],
+        time: float,
+    ) -> dict[str, np.ndarray] | None:
+        """Per detector of the scan, each predicted object's rate in the association
+        weight of its detections (:meth:`ObservedRates.from_stream`)."""
+        if not self.observed_rates or not measurements or not predicted.tracks:
+            return None
+        source = measurements[0].source or ""
+        lineages = [t.lineage for t in predicted.tracks]
+        base = self.class_rates(predicted.tracks)
+        return {
+            detector: observed.from_stream((source, detector), lineages, base, time)
+            for detector in {m.detector for m in measurements}
+        }
+
+    @staticmethod
+    def _observe(
+        observed: ObservedRates,
+        before: Mapping[int, Track],
+        options: Sequence[DetectionOptions],
+        final: Sequence[Cluster],
+        table: _TrackTable,
+        time: float,
+    ) -> ObservedRates:
+        """The observed rates after the scan: per detector, which objects its detections
+        updated or started in the most probable hypothesis (:mod:`semwm.mhf.rates`)."""
+        detector_of: dict[int, str] = {}
+        for option in options:
+            detector = option.measurement.detector
+            detector_of.setdefault(option.new_track.lineage, detector)
+            for old_key in option.existing:
+                detector_of.setdefault(before[old_key].lineage, detector)
+        existed = {t.lineage for t in before.values()}
+        detected: dict[str, list[int]] = {}
+        born: dict[str, list[int]] = {}
+        alive: set[int] = set()
+        for cluster in final:
+            for key in cluster.keys:
+                alive.add(table.tracks[key].lineage)
+            for key in cluster.hypotheses[0].tracks & table.fresh:
+                lineage = table.tracks[key].lineage
+                by = detector_of.get(lineage)
+                if by is not None:
+                    target = detected if lineage in existed else born
+                    target.setdefault(by, []).append(lineage)
+        source = (options[0].measurement.source or "") if options else ""
+        return observed.after_scan(source, time, detected, born, alive)
 
     def undetected(
         self,

@@ -12,9 +12,10 @@ from __future__ import annotations
 import heapq
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from semwm.filters.motion import FloatArray
+from semwm.mhf.rates import ObservedRates
 
 
 @dataclass(frozen=True, eq=False, slots=True)
@@ -107,14 +108,16 @@ class Cluster:
 @dataclass(frozen=True)
 class MHFState:
     """The whole filter: independent clusters of hypotheses (each most probable first,
-    normalised), the track table, and each version's existence probability at
-    ``time`` (:mod:`semwm.mhf.existence`; 1 for every version under ``paper``)."""
+    normalised), the track table, each version's existence probability at
+    ``time`` (:mod:`semwm.mhf.existence`; 1 for every version under ``paper``), and
+    the detection rates observed on the sources' streams (:mod:`semwm.mhf.rates`)."""
 
     clusters: tuple[Cluster, ...]
     tracks: Mapping[int, Track]
     time: float | None
     next_key: int
     existence: Mapping[int, float]
+    observed: ObservedRates = field(default_factory=ObservedRates)
 
     @staticmethod
     def empty() -> MHFState:

@@ -64,7 +64,13 @@ def knowledge(
     region: Any = None,
     known: Sequence[KnownObject] = (),
     detectors: Sequence[DetectorSpec] | None = None,
+    observed_rates: bool = False,
+    merge_distance: float = 0.0,
 ) -> Knowledge:
+    # The brute-force reference (reference.py) implements the classes' detection
+    # rates; the rates observed on the sources' streams (semwm.mhf.rates) are tested
+    # on their own (test_observed_rates.py), so they are off here unless asked for; so is merging
+    # near-identical hypotheses (semwm.mhf.similar, test_similar.py).
     world = WorldSettings(
         dimension=2,
         pruning_ratio=ratio,
@@ -72,6 +78,8 @@ def knowledge(
         association_model=model,  # type: ignore[arg-type]
         gate_probability=gate,
         region=region,
+        observed_detection_rates=observed_rates,
+        merge_distance=merge_distance,
     )
     return resolve(
         KnowledgeDocument(
