@@ -130,6 +130,9 @@ def check(
                 # paper 004: foreign-controlled objects are tracked from observation only
                 label=det.label if knowledge.classes[det.cls].trust_labels else None,
                 clutter_rate=knowledge.detectors[detector].clutter_frequency,
+                sensor=None
+                if det.sensor_position is None
+                else np.asarray(det.sensor_position, dtype=float),
             )
         )
     if problems:

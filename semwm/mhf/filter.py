@@ -123,6 +123,13 @@ class MultipleHypothesisFilter:
         self.missed_detections = self.mht and world.missed_detection_term
         self.observed_rates = self.mht and world.observed_detection_rates
         self.merge_distance = world.merge_distance if self.mht else 0.0
+        ranges = [d.range for d in knowledge.detectors.values()]
+        # coverage is known only when every detector has a range (semwm.mhf.rates)
+        self.sensor_reach = (
+            max(r for r in ranges if r is not None)
+            if ranges and all(r is not None for r in ranges)
+            else None
+        )
         self.region = world.region
         self.removal_existence = world.removal_existence if self.mht else 0.0
         self._leave_relations = {
@@ -169,6 +176,7 @@ class MultipleHypothesisFilter:
         inside = predicted.inside_region(self.region)
         f = self.class_rates(predicted.tracks)
         if observed is not None and self.observed_rates:
+            f = f * observed.covered(predicted.position, self.sensor_reach, start)
             f = observed.over([t.lineage for t in predicted.tracks], f, start, end)
         return mu, f * inside
 
@@ -357,8 +365,10 @@ class MultipleHypothesisFilter:
                 if by is not None:
                     target = detected if lineage in existed else born
                     target.setdefault(by, []).append(lineage)
-        source = (options[0].measurement.source or "") if options else ""
-        return observed.after_scan(source, time, detected, born, alive)
+        first = options[0].measurement if options else None
+        source = (first.source or "") if first is not None else ""
+        sensor = None if first is None or first.sensor is None else tuple(first.sensor.tolist())
+        return observed.after_scan(source, time, detected, born, alive, sensor)
 
     def undetected(
         self,

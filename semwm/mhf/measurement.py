@@ -13,6 +13,7 @@ class Measurement:
 
     ``seq`` is the detection's acceptance number: it identifies the object a new
     track would be (its lineage), stable when the reorder window replays.
+    ``sensor``: where the sensor was (the detection's ``sensor_position``), if given.
     """
 
     seq: int
@@ -24,6 +25,7 @@ class Measurement:
     source: str | None
     label: str | None
     clutter_rate: float
+    sensor: FloatArray | None = None
 
 
 @dataclass(frozen=True, slots=True)

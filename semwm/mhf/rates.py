@@ -54,16 +54,22 @@ its last detection of it."""
 INTERVAL_WEIGHT = 0.1
 """Weight of the newest interval in a source's mean interval between scans."""
 
+STALE_INTERVALS = 10.0
+"""A source that has not scanned for this many of its mean intervals no longer counts
+for coverage."""
+
 DISCOUNT = 0.98
 """Per scan of its source, the weight kept by a stream's hit and miss counts."""
 
 
 @dataclass(frozen=True, slots=True)
 class SourceClock:
-    """When a source last scanned and its mean interval between scans (s)."""
+    """When a source last scanned, its mean interval between scans (s), and where its
+    sensor was at that scan (``None``: its detections did not say)."""
 
     last_time: float
     interval: float | None = None
+    position: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -100,6 +106,36 @@ class ObservedRates:
         if clock is None or counts is None or not clock.interval:
             return 0.0
         return counts.detection_probability / clock.interval
+
+    def covered(self, positions: FloatArray, reach: float | None, time: float) -> FloatArray:
+        """``(N,)``: 1 where an object at ``positions`` ``(N, d)`` may be seen by some
+        source at ``time``, else 0 (the class rate applies only there).
+
+        Coverage is known only when every detector has a ``range`` (``reach``: the
+        largest) and every source that scanned within :data:`STALE_INTERVALS` of its
+        intervals gave its sensor position: then an object farther than ``reach`` from
+        every such source's last position is out of view. Otherwise every object may
+        be seen (all ones).
+        """
+        count = positions.shape[0]
+        everywhere = np.ones(count)
+        if reach is None or count == 0:
+            return everywhere
+        sensors = []
+        for clock in self.sources.values():
+            stale = STALE_INTERVALS * (clock.interval or 0.0)
+            if clock.interval is None or time - clock.last_time > stale:
+                continue
+            if clock.position is None:
+                return everywhere
+            sensors.append(clock.position)
+        if not sensors:
+            return everywhere
+        at = np.asarray(sensors, dtype=float)[:, : positions.shape[1]]
+        offset = positions[:, None, :] - at[None, :, :]
+        near = np.einsum("nsd,nsd->ns", offset, offset) <= reach * reach
+        result: FloatArray = near.any(axis=1).astype(float)
+        return result
 
     def from_stream(
         self, stream: StreamKey, lineages: Sequence[int], class_rates: FloatArray, time: float
@@ -156,18 +192,19 @@ class ObservedRates:
         detected: Mapping[str, Iterable[int]],
         born: Mapping[str, Iterable[int]],
         alive: frozenset[int] | set[int],
+        position: tuple[float, ...] | None = None,
     ) -> ObservedRates:
         """The rates after one scan of ``source`` at ``time``.
 
         ``detected``: per detector, the lineages (that existed before the scan) whose
         version in the most probable hypothesis took one of its detections; ``born``:
         per detector, the new lineages it started; ``alive``: every lineage the state
-        holds after the scan.
+        holds after the scan; ``position``: where the source's sensor was.
         """
         sources = dict(self.sources)
         clock = sources.get(source)
         if clock is None:
-            sources[source] = SourceClock(time)
+            sources[source] = SourceClock(time, None, position)
         elif time > clock.last_time:
             step = time - clock.last_time
             interval = (
@@ -175,7 +212,9 @@ class ObservedRates:
                 if clock.interval is None
                 else (1.0 - INTERVAL_WEIGHT) * clock.interval + INTERVAL_WEIGHT * step
             )
-            sources[source] = SourceClock(time, interval)
+            sources[source] = SourceClock(time, interval, position)
+        else:
+            sources[source] = SourceClock(clock.last_time, clock.interval, position)
         streams = dict(self.streams)
         detectors = {d for (s, d) in streams if s == source} | set(detected) | set(born)
         for detector in detectors:

@@ -132,3 +132,23 @@ def test_a_teams_hypotheses_stay_bounded_and_its_world_is_the_four_cups() -> Non
     assert sorted(np.round(o.position, 1).tolist() for o in wm.world().objects) == [
         list(xy) for xy in CUPS
     ]
+
+
+def test_the_class_rate_applies_only_where_some_sensor_reaches() -> None:
+    rates = ObservedRates()
+    for k in range(5):
+        rates = rates.after_scan("a", k / 10, {"camera": [1]}, {}, {1}, (0.0, 0.0))
+        rates = rates.after_scan("b", k / 10, {"camera": [2]}, {}, {2}, (10.0, 0.0))
+    positions = np.array([[1.0, 1.0], [5.0, 0.0], [9.0, 0.0]])
+    assert rates.covered(positions, 3.0, 0.4).tolist() == [1.0, 0.0, 1.0]
+    assert rates.covered(positions, None, 0.4).tolist() == [
+        1.0,
+        1.0,
+        1.0,
+    ]  # a detector without range
+    # a source that does not say where its sensor is: coverage unknown, everywhere
+    unknown = rates.after_scan("c", 0.4, {"camera": [3]}, {}, {1, 2, 3})
+    unknown = unknown.after_scan("c", 0.5, {"camera": [3]}, {}, {1, 2, 3})
+    assert unknown.covered(positions, 3.0, 0.5).tolist() == [1.0, 1.0, 1.0]
+    # a source silent for many of its intervals no longer counts
+    assert rates.covered(positions, 3.0, 5.0).tolist() == [1.0, 1.0, 1.0]
