@@ -14,6 +14,7 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, TypeAdapter
 from typing_extensions import TypedDict  # pydantic needs it before Python 3.12
 
+from semwm.detection import MAX_TIME_STD
 from semwm.knowledge import ClassSpec, ResolvedClass
 
 MAX_COORDINATE = 1e6
@@ -27,6 +28,7 @@ Finite = Annotated[float, Field(allow_inf_nan=False)]
 Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Vector = Annotated[list[Coordinate], Field(min_length=2, max_length=3)]
 Name = Annotated[str, Field(min_length=1, max_length=MAX_NAME)]
+TimeStd = Annotated[float, Field(ge=0.0, le=MAX_TIME_STD, allow_inf_nan=False)]
 MAX_KEY = 200
 """The longest idempotency key (``Idempotency-Key`` header or a batch's ``batch_id``)."""
 BatchId = Annotated[str, Field(min_length=1, max_length=MAX_KEY)]
@@ -101,6 +103,11 @@ class DetectionIn(Body):
     label: Name | None = Field(default=None, description="An identity, e.g. a robot's own id.")
     sensor_position: Vector | None = Field(
         default=None, description="Where the sensor was (m), for detector ranges."
+    )
+    time_std: TimeStd | None = Field(
+        default=None,
+        description="Standard uncertainty of `time` (s): the position is as uncertain as "
+        "the object's motion over it. The service sets it for synced sources.",
     )
 
     def to_domain(self) -> dict[str, Any]:
@@ -178,6 +185,7 @@ DetectionDict = TypedDict(
         "detector": NotRequired[Name | None],
         "label": NotRequired[Name | None],
         "sensor_position": NotRequired[Vector | None],
+        "time_std": NotRequired[TimeStd | None],
     },
 )
 DetectionDict.__pydantic_config__ = _FAST  # type: ignore[attr-defined]

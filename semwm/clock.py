@@ -98,8 +98,8 @@ class ClockEstimate:
         Exchanges seen in all (kept or not).
     """
 
-    window: int = 8
-    best: int = 3
+    window: int = 32
+    best: int = 16
     exchanges: tuple[Exchange, ...] = field(default=())
     count: int = 0
 

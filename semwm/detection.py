@@ -7,6 +7,8 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+MAX_TIME_STD = 10.0
+"""Largest ``time_std`` accepted (s): a stamp less certain than that is not a time."""
 
 
 class Detection(BaseModel):
@@ -33,6 +35,10 @@ class Detection(BaseModel):
         (paper 000 III-B labeling rules).
     sensor_position
         Where the sensor was (m); with a detector ``range`` it enables paper 000's C2.
+    time_std
+        Standard uncertainty of ``time`` (s), e.g. a synced clock's offset uncertainty
+        (set by the service for synced sources): the position is then as uncertain as
+        the object's motion over it (``R + time_std^2 v v^T``).
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
@@ -45,6 +51,7 @@ class Detection(BaseModel):
     detector: str | None = None
     label: str | None = None
     sensor_position: tuple[Finite, ...] | None = None
+    time_std: Annotated[float, Field(ge=0.0, le=MAX_TIME_STD, allow_inf_nan=False)] | None = None
 
     def to_dict(self) -> dict[str, object]:
         return self.model_dump(by_alias=True, exclude_none=True)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from semwm.clock import ClockEstimate, Exchange
-from semwm.detection import Detection
+from semwm.detection import MAX_TIME_STD, Detection
 
 DetectionLike = Detection | Mapping[str, Any]
 
@@ -146,10 +146,17 @@ def _place_words(source: str | None, stamp: float, time: float) -> tuple[str, st
     return where, who
 
 
-def _with_time(d: DetectionLike, time: float) -> DetectionLike:
+def _with_time(d: DetectionLike, time: float, offset_std: float | None) -> DetectionLike:
+    """``d`` at ``time`` on the service clock; its ``time_std`` combines its own with the
+    clock offset's uncertainty ``offset_std``."""
+    update: dict[str, Any] = {"time": time}
+    if offset_std:
+        own = _field(d, "time_std")
+        own = float(own) if isinstance(own, int | float) else 0.0
+        update["time_std"] = min(math.hypot(own, offset_std), MAX_TIME_STD)
     if isinstance(d, Detection):
-        return d.model_copy(update={"time": time})
-    return {**d, "time": time}
+        return d.model_copy(update=update)
+    return {**d, **update}
 
 
 class SourceRegistry:
@@ -163,7 +170,7 @@ class SourceRegistry:
         The clock filter of :class:`semwm.clock.ClockEstimate`.
     """
 
-    def __init__(self, guard: TimeGuard | None = None, *, window: int = 8, best: int = 3) -> None:
+    def __init__(self, guard: TimeGuard | None = None, *, window: int = 32, best: int = 16) -> None:
         self.guard = guard or TimeGuard()
         ClockEstimate(window, best)  # fail early on bad settings
         self._window, self._best = window, best
@@ -224,7 +231,11 @@ class SourceRegistry:
                     problems.append(problem)
                 latest[source] = max(latest.get(source, -math.inf), float(time))
             counts[source] = counts.get(source, 0) + 1
-            placed.append(_with_time(d, time) if time is not stamp else d)
+            placed.append(
+                _with_time(d, time, record.clock.offset_std if record is not None else None)
+                if time is not stamp
+                else d
+            )
         if problems:
             for p in problems:
                 record = self._record(p.source)

@@ -133,6 +133,7 @@ def check(
                 sensor=None
                 if det.sensor_position is None
                 else np.asarray(det.sensor_position, dtype=float),
+                time_std=det.time_std or 0.0,
             )
         )
     if problems:

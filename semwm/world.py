@@ -728,7 +728,9 @@ class WorldModel:
         predicted = self._mhf.predict(state, keys, at)
         if self._mhf.mht:
             future = at if state.time is not None and at > state.time else state.time or at
-            existence, log_q = self._mhf.existence_at(state, predicted, future)
+            # past the last scan nothing says what the sources reported: the classes'
+            # rates only, not the rates the sources were observed to report at
+            existence, log_q = self._mhf.existence_at(state, predicted, future, observed=False)
             clusters: tuple[Cluster, ...] = (
                 self._mhf.undetected(state.clusters, log_q, state.tracks)
                 if log_q

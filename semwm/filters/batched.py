@@ -44,13 +44,15 @@ def imm_mix(
        P^0_j = \\sum_i \\omega_{ij} [P_i + (x_i - x^0_j)(x_i - x^0_j)^T]
 
     Returns the mixed means and covariances and the predicted mode probabilities
-    :math:`\\bar c`.
+    :math:`\\bar c`. ``T`` is ``(M, M)``, or ``(N, M, M)`` (one per object: a
+    transition over each object's own time step).
     """
     if x.shape[1] == 1:
         return x, P, mu
-    cbar = mu @ T  # (N, M)
+    T3 = T[None, :, :] if T.ndim == 2 else T
+    cbar = np.einsum("ni,nij->nj", mu, np.broadcast_to(T3, (mu.shape[0], *T3.shape[1:])))
     reachable = cbar > 0.0
-    omega = T[None, :, :] * mu[:, :, None] / np.where(reachable, cbar, 1.0)[:, None, :]
+    omega = T3 * mu[:, :, None] / np.where(reachable, cbar, 1.0)[:, None, :]
     # a mode nobody can reach starts from the mixture (its probability is 0 anyway)
     omega = np.where(reachable[:, None, :], omega, mu[:, :, None])  # (N, i, j)
     x0 = np.einsum("nij,nik->njk", omega, x)

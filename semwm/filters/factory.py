@@ -36,6 +36,8 @@ class ClassFilter:
         ``(M, d, d)``: each mode's system noise Q_c.
     transition
         ``(M, M)``: ``T[i, j] = P(mode j at k | mode i at k-1)``.
+    transition_period
+        The time step (s) ``transition`` is stated for; ``None``: one prediction step.
     initial_mode_probabilities
         ``(M,)``.
     initial_covariance
@@ -52,6 +54,7 @@ class ClassFilter:
     stationary_velocity_variance: float = 0.0
     with_velocity: bool = field(default=False)
     velocity_decay: float = 0.0
+    transition_period: float | None = None
 
     @property
     def modes(self) -> int:
@@ -71,6 +74,32 @@ class ClassFilter:
         )
         mu = np.broadcast_to(self.initial_mode_probabilities, (K, self.modes))
         return x, P.copy(), mu.copy()
+
+    @cached_property
+    def _transition_eigen(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``T = V diag(lam) V^-1`` (real, ``lam > 0``: checked with the knowledge)."""
+        lam, V = np.linalg.eig(self.transition)
+        return lam.real, V.real, np.linalg.inv(V).real
+
+    def transitions(self, dt: FloatArray) -> FloatArray:
+        r"""The mode transition over each object's step ``dt``: ``(M, M)`` once per
+        prediction step (paper 002), or with ``transition_period`` ``(N, M, M)``:
+
+        .. math:: T(\Delta) = T^{\Delta / \Delta_T} = V \operatorname{diag}
+           (\lambda^{\Delta / \Delta_T}) V^{-1}
+
+        (a continuous-time Markov chain that is ``T`` after one period), so that how
+        often the modes mix does not depend on how often scans come.
+        """
+        if self.transition_period is None or self.modes == 1:
+            return self.transition
+        lam, V, V_inv = self._transition_eigen
+        steps = np.asarray(dt, dtype=float) / self.transition_period
+        powers = lam[None, :] ** steps[:, None]  # (N, M)
+        result: FloatArray = np.einsum("ik,nk,kj->nij", V, powers, V_inv)
+        result = np.clip(result, 0.0, 1.0)
+        result /= result.sum(axis=2, keepdims=True)
+        return result
 
     @cached_property
     def _model_coefficients(self) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -113,12 +142,12 @@ class ClassFilter:
             return self._predict_decaying(x, P, mu, dt, moving)
         if moving.all():
             F, Q = self.models(dt)
-            return batched.predict(x, P, mu, F, Q, self.transition)
+            return batched.predict(x, P, mu, F, Q, self.transitions(dt))
         x, P, mu = x.copy(), P.copy(), mu.copy()
         if moving.any():
             F, Q = self.models(dt[moving])
             x[moving], P[moving], mu[moving] = batched.predict(
-                x[moving], P[moving], mu[moving], F, Q, self.transition
+                x[moving], P[moving], mu[moving], F, Q, self.transitions(dt[moving])
             )
         return x, P, mu
 
@@ -144,7 +173,7 @@ class ClassFilter:
         d = self.dim
         xs, Ps, mus, dts = x[moving], P[moving], mu[moving], dt[moving]
         F, Q = self.models(dts)
-        x0, P0, cbar = batched.imm_mix(xs, Ps, mus, self.transition)
+        x0, P0, cbar = batched.imm_mix(xs, Ps, mus, self.transitions(dts))
         F_mean, F_cov = F.copy(), F.copy()
         eye = np.eye(d)
         for m, order in enumerate(self.orders):
@@ -219,6 +248,7 @@ def build_class_filter(resolved: ResolvedClass, dim: int) -> ClassFilter:
         )
         with_velocity = True
         stationary = spec.stationary_velocity_variance
+        period = spec.transition_period
     else:
         orders = (spec.model.motion_model,)
         densities = np.array([spec.model.system_noise], dtype=float)
@@ -226,6 +256,7 @@ def build_class_filter(resolved: ResolvedClass, dim: int) -> ClassFilter:
         initial_mu = np.ones(1)
         with_velocity = spec.model.motion_model == "first_order"
         stationary = 0.0
+        period = None
     n = 2 * dim if with_velocity else dim
     P0 = np.zeros((n, n))
     P0[:dim, :dim] = np.asarray(resolved.initial_covariance, dtype=float)
@@ -242,4 +273,5 @@ def build_class_filter(resolved: ResolvedClass, dim: int) -> ClassFilter:
         stationary_velocity_variance=stationary,
         with_velocity=with_velocity,
         velocity_decay=resolved.velocity_decay if with_velocity else 0.0,
+        transition_period=period,
     )

@@ -214,7 +214,11 @@ class IMMFilterSpec(Frozen):
     positive definite.
 
     ``transition_matrix[i][j]`` is P(mode j at step k | mode i at step k-1): rows
-    sum to 1, and it applies once per prediction step.
+    sum to 1. Without ``transition_period`` it applies once per prediction step
+    (paper 002), so how often modes mix depends on how often scans come (five
+    robots whose stamps differ by milliseconds mix five times per frame). With
+    ``transition_period`` (s) it is the transition over that time, and a step of
+    ``dt`` takes ``T^(dt / transition_period)`` (its eigenvalues must be positive).
     """
 
     type: Literal["imm"] = "imm"
@@ -222,6 +226,7 @@ class IMMFilterSpec(Frozen):
     transition_matrix: Matrix
     initial_mode_probabilities: tuple[Entry, ...] | None = None
     stationary_velocity_variance: Positive = 1e-4
+    transition_period: Positive | None = None
 
 
 FilterSpec = Annotated[KalmanFilterSpec | IMMFilterSpec, Field(discriminator="type")]

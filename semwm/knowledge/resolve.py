@@ -102,6 +102,18 @@ def _transition_problems(spec: IMMFilterSpec, path: Path) -> list[Problem]:
                     where,
                 )
             )
+    if not problems and spec.transition_period is not None:
+        eigenvalues = np.linalg.eigvals(np.asarray(matrix, dtype=float))
+        if np.any(np.abs(eigenvalues.imag) > 1e-12) or np.any(eigenvalues.real <= 0.0):
+            problems.append(
+                Problem(
+                    "with transition_period the transition matrix is scaled in time "
+                    "(T^(dt / period)), which needs real positive eigenvalues; found "
+                    f"{np.round(eigenvalues, 6).tolist()} (make the diagonal dominant, "
+                    "e.g. each row's own mode above 0.5)",
+                    where,
+                )
+            )
     initial = spec.initial_mode_probabilities
     if initial is not None:
         where = (*path, "initial_mode_probabilities")

@@ -119,6 +119,7 @@ _IMM_CHILDREN = (
     "transition_matrix",
     "initial_mode_probabilities",
     "stationary_velocity_variance",
+    "transition_period",
 )
 _RELATION_ATTRIBUTES = ("target", "max_distance", "frequency")
 _DETECTOR_ATTRIBUTES = (
@@ -443,6 +444,10 @@ class _Reader:
             child = parts["stationary_velocity_variance"][0]
             self.record((*path, "stationary_velocity_variance"), self.line(child))
             result["stationary_velocity_variance"] = _number_or_text(self.text(child))
+        if "transition_period" in parts:
+            child = parts["transition_period"][0]
+            self.record((*path, "transition_period"), self.line(child))
+            result["transition_period"] = _number_or_text(self.text(child))
         return result
 
     def motion_models(
@@ -634,6 +639,8 @@ def _write_filter(element: etree._Element, spec: KalmanFilterSpec | IMMFilterSpe
             "stationary_velocity_variance",
             _format_number(spec.stationary_velocity_variance),
         )
+        if spec.transition_period is not None:
+            _add(element, "transition_period", _format_number(spec.transition_period))
 
 
 def _write_class(root: etree._Element, spec: ClassSpec) -> None:

@@ -335,18 +335,23 @@ class Associator:
                 np.trace(predicted.position_covariance, axis1=1, axis2=2)[None, :]
                 + np.trace(R, axis1=1, axis2=2)[:, None]
             )
+            time_var = np.array([m.time_std * m.time_std for m in measurements])
+            if np.any(time_var > 0.0):  # trace(sigma_t^2 v v^T) = sigma_t^2 |v|^2
+                speed2 = (predicted.velocity(self.dim) ** 2).sum(-1)
+                bound = bound + self.gate * time_var[:, None] * speed2[None, :]
             candidate &= (diff * diff).sum(-1) <= bound
             if labelled is not None:
                 candidate |= labelled & (likelihood > 0.0)
         jj, ii = np.nonzero(candidate)
         if jj.size == 0:
             return found
-        S = predicted.position_covariance[ii] + R[jj]
+        R_pair = R[jj] + self._timing_noise(predicted, measurements, jj, ii)
+        S = predicted.position_covariance[ii] + R_pair
         d2 = mahalanobis_squared(diff[jj, ii], S)
         passed = d2 <= self.gate
         if labelled is not None:
             passed |= labelled[jj, ii]
-        jj, ii = jj[passed], ii[passed]
+        jj, ii, R_pair = jj[passed], ii[passed], R_pair[passed]
         by_class: dict[str, list[int]] = {}
         for p, i in enumerate(ii):
             by_class.setdefault(tracks[i].cls, []).append(p)
@@ -356,15 +361,16 @@ class Associator:
             flt = self.factory.filter_for(cls)
             rows_i = ii[pairs]
             rows_j = jj[pairs]
+            R_rows = R_pair[pairs]
             x, P, mu = predicted.stacked(rows_i)
-            x_new, P_new, mu_new, log_lik = flt.update(x, P, mu, z[rows_j], R[rows_j])
+            x_new, P_new, mu_new, log_lik = flt.update(x, P, mu, z[rows_j], R_rows)
             if self.model == "paper":
                 x_hat, _ = flt.combine(x_new, P_new, mu_new)
                 delta = z[rows_j] - x_hat[:, :d]
-                log_lik = -0.5 * mahalanobis_squared(delta, R[rows_j])
+                log_lik = -0.5 * mahalanobis_squared(delta, R_rows)
             elif labelled is not None and labelled[rows_j, rows_i].any():
                 log_lik = self._label_robust(
-                    log_lik, labelled[rows_j, rows_i], diff, rows_j, rows_i, predicted, R
+                    log_lik, labelled[rows_j, rows_i], diff, rows_j, rows_i, predicted, R_rows
                 )
             if mht:  # Bayes over the class distribution (semwm.mhf.classes)
                 posteriors = probs[rows_i] * reported[rows_j]
@@ -411,6 +417,30 @@ class Associator:
                 found[j][old.key] = (updated, log_num, rate - old.rate)
         return found
 
+    def _timing_noise(
+        self,
+        predicted: Predicted,
+        measurements: Sequence[Measurement],
+        jj: IndexArray,
+        ii: IndexArray,
+    ) -> FloatArray | float:
+        r"""Measurement noise from an uncertain time stamp, per (detection, object) pair.
+
+        A detection stamped with standard uncertainty :math:`\sigma_t` (``time_std``:
+        a synced source's clock offset) of an object moving at :math:`v` is off by
+        :math:`v\,\delta t` with :math:`\delta t \sim N(0, \sigma_t^2)`, to first order:
+
+        .. math:: R' = R + \sigma_t^2\, v v^\top
+
+        ``0.0`` when no detection has a time uncertainty.
+        """
+        sigma2 = np.array([m.time_std * m.time_std for m in measurements])
+        if not np.any(sigma2 > 0.0):
+            return 0.0
+        v = predicted.velocity(self.dim)[ii]
+        noise: FloatArray = sigma2[jj][:, None, None] * v[:, :, None] * v[:, None, :]
+        return noise
+
     def _label_robust(
         self,
         log_lik: FloatArray,
@@ -419,14 +449,15 @@ class Associator:
         rows_j: IndexArray,
         rows_i: IndexArray,
         predicted: Predicted,
-        R: FloatArray,
+        R_rows: FloatArray,
     ) -> FloatArray:
         """For a detection and the object holding its label: the likelihood mixed with a
         wide component (standard deviation ``label_gate / 3`` per axis), so that a
-        robot's own precise report far from its lagging estimate still fits it."""
+        robot's own precise report far from its lagging estimate still fits it.
+        ``R_rows``: each pair's measurement noise."""
         d = self.dim
         wide_var = (self.label_gate / 3.0) ** 2
-        S_wide = predicted.position_covariance[rows_i] + R[rows_j] + wide_var * np.eye(d)
+        S_wide = predicted.position_covariance[rows_i] + R_rows + wide_var * np.eye(d)
         delta = diff[rows_j, rows_i]
         S_inv, log_det = inverse_and_log_det(S_wide)
         log_wide = -0.5 * (quadratic_form(delta, S_inv) + log_det + d * math.log(2.0 * math.pi))

@@ -151,14 +151,16 @@ class MultipleHypothesisFilter:
         observed: ObservedRates | None = None,
         start: float = 0.0,
         end: float = 0.0,
+        excess: bool = True,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Leave rates mu and detection rates f (Hz) of predicted objects (``mht``).
 
         mu: the class's ``leave_frequency``, or a disappearance relation's rate near its
         target; f: the class's ``detection_frequency`` (raised to the rate the sources
         are observed to report the object at over ``[start, end]``,
-        :mod:`semwm.mhf.rates`) times the probability that the object is inside the
-        region (no sensor sees outside it), 0 without the missed-detection term.
+        :mod:`semwm.mhf.rates`; not with ``excess`` false) times the probability that
+        the object is inside the region (no sensor sees outside it), 0 without the
+        missed-detection term.
         """
         classes = self.knowledge.classes
         mu = np.array(
@@ -177,7 +179,8 @@ class MultipleHypothesisFilter:
         f = self.class_rates(predicted.tracks)
         if observed is not None and self.observed_rates:
             f = f * observed.covered(predicted.position, self.sensor_reach, start)
-            f = observed.over([t.lineage for t in predicted.tracks], f, start, end)
+            if excess:
+                f = observed.over([t.lineage for t in predicted.tracks], f, start, end)
         return mu, f * inside
 
     def class_rates(self, tracks: Sequence[Track]) -> np.ndarray:
@@ -186,15 +189,17 @@ class MultipleHypothesisFilter:
         return np.array([classes[t.cls].detection_frequency for t in tracks], dtype=float)
 
     def existence_at(
-        self, state: MHFState, predicted: Predicted, time: float
+        self, state: MHFState, predicted: Predicted, time: float, observed: bool = True
     ) -> tuple[dict[int, float], dict[int, float]]:
         """Existence of every predicted version at ``time`` (>= ``state.time``) with no
-        detection since ``state.time``, and the log missed-detection likelihood of each."""
+        detection since ``state.time``, and the log missed-detection likelihood of each.
+        ``observed``: with the rates observed on the sources' streams (a scan at
+        ``time`` said what they reported); else with the classes' rates (a query)."""
         r = np.array([state.existence.get(t.key, 1.0) for t in predicted.tracks])
         if not self.mht or state.time is None or time <= state.time or not predicted.tracks:
             keys = [t.key for t in predicted.tracks]
             return dict(zip(keys, r.tolist(), strict=True)), {}
-        mu, f = self.rates(predicted, state.observed, state.time, time)
+        mu, f = self.rates(predicted, state.observed, state.time, time, excess=observed)
         r_new, log_q = survive(r, mu, f, time - state.time)
         keys = [t.key for t in predicted.tracks]
         return (

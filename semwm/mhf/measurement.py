@@ -13,7 +13,8 @@ class Measurement:
 
     ``seq`` is the detection's acceptance number: it identifies the object a new
     track would be (its lineage), stable when the reorder window replays.
-    ``sensor``: where the sensor was (the detection's ``sensor_position``), if given.
+    ``sensor``: where the sensor was (the detection's ``sensor_position``), if given;
+    ``time_std``: standard uncertainty of ``time`` (s).
     """
 
     seq: int
@@ -26,6 +27,7 @@ class Measurement:
     label: str | None
     clutter_rate: float
     sensor: FloatArray | None = None
+    time_std: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -85,6 +85,15 @@ class Predicted:
             )
         return known
 
+    def velocity(self, dim: int) -> FloatArray:
+        """``(N, dim)``: each object's predicted velocity (its combined state mean's
+        entries after the position; zero for a filter without velocity)."""
+        result = np.zeros((len(self.tracks), dim))
+        for i, mean in enumerate(self.state_mean):
+            if mean.shape[-1] >= 2 * dim:
+                result[i] = mean[..., dim : 2 * dim].reshape(-1)[:dim]
+        return result
+
     def subset(self, rows: list[int]) -> Predicted:
         """The predictions of ``rows``, in that order."""
         return Predicted(

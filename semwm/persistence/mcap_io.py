@@ -59,6 +59,7 @@ _DETECTION = {
         "detector": {"type": "string"},
         "label": {"type": "string"},
         "sensor_position": _NUMBER_LIST,
+        "time_std": {"type": "number"},
     },
     "required": ["time", "class", "position"],
 }

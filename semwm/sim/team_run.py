@@ -55,7 +55,7 @@ class Network:
     max_offset: float = 0.0
     latency: tuple[float, float] = (0.0, 0.0)
     sync: bool = True
-    sync_period: float = 1.0
+    sync_period: float = 0.2
     hold: float | None = None
 
     @property

@@ -114,3 +114,19 @@ def test_a_sync_restarts_the_jump_reference() -> None:
         registry.place([{"time": 50.0, "source": "r1"}])
     registry.sync("r1", exchange(10.0, 0.0, 0.01, 0.01))
     registry.place([{"time": 50.0, "source": "r1"}])
+
+
+def test_a_synced_detection_carries_the_offsets_uncertainty_as_time_std() -> None:
+    registry = SourceRegistry()
+    registry.sync("r1", exchange(5.0, 100.0, 0.02, 0.08))  # asymmetric: uncertain offset
+    std = registry.clock("r1").offset_std  # type: ignore[union-attr]
+    assert std is not None and std > 0.0
+    placement = registry.place(
+        [{"time": 6.0, "class": "Cup", "position": [0, 0], "source": "r1"},
+         {"time": 6.0, "class": "Cup", "position": [0, 0], "source": "r1", "time_std": 0.03},
+         {"time": 6.0, "class": "Cup", "position": [0, 0], "source": "r2"}],
+    )  # fmt: skip
+    placed = [dict(d) for d in placement.detections]  # type: ignore[call-overload]
+    assert placed[0]["time_std"] == pytest.approx(std)
+    assert placed[1]["time_std"] == pytest.approx(math.hypot(0.03, std))
+    assert "time_std" not in placed[2]  # unsynced: as sent
