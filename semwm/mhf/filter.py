@@ -296,7 +296,8 @@ class MultipleHypothesisFilter:
             book.put(self._split(expanded, table.tracks))
         final = book.clusters()
         if self.merge_distance > 0.0:
-            final = self._merge_similar(final, table)
+            untouched = {id(c) for c in clusters}
+            final = self._merge_similar(final, table, untouched)
         referenced: set[int] = set().union(*(c.keys for c in final))
         tracks = {k: table.tracks[k] for k in referenced}
         kept = {k: table.existence.get(k, 1.0) for k in referenced}
@@ -306,13 +307,14 @@ class MultipleHypothesisFilter:
         return MHFState(final, tracks, time, table.next_key, kept, observed)
 
     def _merge_similar(
-        self, clusters: Sequence[Cluster], table: _TrackTable
+        self, clusters: Sequence[Cluster], table: _TrackTable, untouched: set[int]
     ) -> tuple[Cluster, ...]:
         """Clusters with hypotheses that differ only in near-identical versions of their
-        objects merged (:mod:`semwm.mhf.similar`)."""
+        objects merged (:mod:`semwm.mhf.similar`); clusters no detection of the scan
+        touched (``id`` in ``untouched``) were merged when they last changed."""
         result = []
         for cluster in clusters:
-            if len(cluster.hypotheses) > 1:
+            if len(cluster.hypotheses) > 1 and id(cluster) not in untouched:
                 merged = merge_similar(
                     cluster.hypotheses, table.tracks, table.existence, self.merge_distance
                 )

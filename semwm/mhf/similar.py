@@ -65,6 +65,43 @@ def same_estimate(
     return bool(np.max(np.abs(log_a - log_b)) <= LOG_DET_TOLERANCE)
 
 
+def _same_pairs(
+    versions: list[Track], existence: Mapping[int, float], max_distance: float
+) -> set[tuple[int, int]]:
+    """The ordered key pairs ``(a, b)`` of versions of one lineage that are the same
+    estimate (:func:`same_estimate`), batched: one inverse and log-determinant per
+    version, then every pair in one numpy expression."""
+    groups: dict[tuple[str, str | None, tuple[int, ...]], list[Track]] = {}
+    for track in versions:  # class, label and state shape must agree
+        groups.setdefault((track.cls, track.label, track.x.shape), []).append(track)
+    result: set[tuple[int, int]] = set()
+    for members in groups.values():
+        if len(members) < 2:
+            continue
+        x = np.stack([t.x for t in members])  # (V, M, n)
+        P = np.stack([t.P for t in members])  # (V, M, n, n)
+        mu = np.stack([t.mu for t in members])  # (V, M)
+        probs = np.stack([t.class_probs for t in members])  # (V, K)
+        r = np.array([existence.get(t.key, 1.0) for t in members])
+        sign, log_det = np.linalg.slogdet(P)  # (V, M)
+        valid = np.all(sign > 0, axis=1)
+        P_inv = np.linalg.inv(np.where(valid[:, None, None, None], P, np.eye(P.shape[-1])))
+        delta = x[:, None] - x[None, :]  # (a, b, M, n): x_a - x_b
+        d2 = np.einsum("abmi,amij,abmj->abm", delta, P_inv, delta).max(axis=2)
+        same = (
+            (d2 <= max_distance)
+            & (np.abs(log_det[:, None] - log_det[None, :]).max(axis=2) <= LOG_DET_TOLERANCE)
+            & (np.abs(r[:, None] - r[None, :]) <= PROBABILITY_TOLERANCE)
+            & (np.abs(mu[:, None] - mu[None, :]).max(axis=2) <= PROBABILITY_TOLERANCE)
+            & (np.abs(probs[:, None] - probs[None, :]).max(axis=2) <= PROBABILITY_TOLERANCE)
+            & valid[:, None]
+            & valid[None, :]
+        )
+        for i, j in zip(*np.nonzero(same), strict=True):
+            result.add((members[i].key, members[j].key))
+    return result
+
+
 def merge_similar(
     hypotheses: Sequence[Hypothesis],
     tracks: Mapping[int, Track],
@@ -80,24 +117,30 @@ def merge_similar(
         groups.setdefault(frozenset(tracks[k].lineage for k in h.tracks), []).append(index)
     if all(len(members) == 1 for members in groups.values()):
         return tuple(hypotheses)
+    # versions of each lineage held by hypotheses that have a twin candidate
+    by_lineage: dict[int, dict[int, Track]] = {}
+    for members in groups.values():
+        if len(members) > 1:
+            for index in members:
+                for key in hypotheses[index].tracks:
+                    track = tracks[key]
+                    by_lineage.setdefault(track.lineage, {})[key] = track
+    same: set[tuple[int, int]] = set()
+    for of_lineage in by_lineage.values():
+        if len(of_lineage) > 1:
+            same |= _same_pairs(list(of_lineage.values()), existence, max_distance)
+    if not same:
+        return tuple(hypotheses)
     weights = [h.log_weight for h in hypotheses]
     absorbed: set[int] = set()
     for members in groups.values():
-        kept: list[tuple[int, dict[int, Track]]] = []  # representative, lineage -> version
+        kept: list[tuple[int, dict[int, int]]] = []  # representative, lineage -> key
         for index in members:  # most probable first
-            h = hypotheses[index]
-            versions = {tracks[k].lineage: tracks[k] for k in h.tracks}
+            versions = {tracks[k].lineage: k for k in hypotheses[index].tracks}
             for representative, held in kept:
                 if all(
-                    same_estimate(
-                        held[lineage],
-                        version,
-                        existence.get(held[lineage].key, 1.0),
-                        existence.get(version.key, 1.0),
-                        max_distance,
-                    )
-                    for lineage, version in versions.items()
-                    if held[lineage].key != version.key
+                    held[lineage] == key or (held[lineage], key) in same
+                    for lineage, key in versions.items()
                 ):
                     weights[representative] = log_add(weights[representative], weights[index])
                     absorbed.add(index)

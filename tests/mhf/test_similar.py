@@ -68,3 +68,29 @@ def test_twins_merge_into_the_more_probable_and_probabilities_add() -> None:
     ]
     assert [math.exp(h.log_weight) for h in merged] == pytest.approx([0.8, 0.15, 0.05])
     assert merge_similar(hypotheses, tracks, {}, 0.0) == hypotheses  # 0 turns it off
+
+
+def test_the_batched_pairs_agree_with_the_pairwise_definition() -> None:
+    from semwm.mhf.similar import _same_pairs
+
+    rng = np.random.default_rng(3)
+    versions = [
+        version(
+            k,
+            7,
+            float(rng.choice([0.0, 0.005, 0.02, 0.2])),
+            variance=float(rng.choice([0.01, 0.0101, 0.02])),
+            label=rng.choice([None, "peer1"], p=[0.8, 0.2]),
+        )
+        for k in range(12)
+    ]
+    existence = {k: float(rng.choice([1.0, 0.995, 0.9])) for k in range(12)}
+    batched = _same_pairs(versions, existence, 0.01)
+    pairwise = {
+        (a.key, b.key)
+        for a in versions
+        for b in versions
+        if same_estimate(a, b, existence[a.key], existence[b.key], 0.01)
+    }
+    assert batched == pairwise
+    assert len({(a, b) for a, b in pairwise if a != b}) > 0  # some twins to find
