@@ -138,8 +138,14 @@ def main() -> None:
                         help="write benchmarks/results/ instead of benchmarks/out/")  # fmt: skip
     args = parser.parse_args()
     doc = run(args.seeds, args.duration)
-    directory = HERE / ("results" if args.update_results else "out")
-    write_results(directory, "team", doc, markdown(doc), quick=False)
+    write_results(
+        HERE / "results",
+        "team",
+        doc,
+        markdown(doc),
+        quick=False,
+        update_results=args.update_results,
+    )
 
 
 if __name__ == "__main__":
