@@ -40,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.special import chdtri
 
+from semwm.filters import batched
 from semwm.filters.factory import FilterFactory
 from semwm.filters.motion import FloatArray
 from semwm.filters.small import inverse_and_log_det, mahalanobis_squared, quadratic_form
@@ -352,47 +353,57 @@ class Associator:
         if labelled is not None:
             passed |= labelled[jj, ii]
         jj, ii, R_pair = jj[passed], ii[passed], R_pair[passed]
-        by_class: dict[str, list[int]] = {}
-        for p, i in enumerate(ii):
-            by_class.setdefault(tracks[i].cls, []).append(p)
+        if mht:  # Bayes over the class distribution (semwm.mhf.classes), every pair at once
+            posteriors = probs[ii] * reported[jj]
+            posteriors /= posteriors.sum(axis=1, keepdims=True)
+            names = self.class_model.names
+            refined_all = [names[k] for k in self.class_model.published_many(posteriors)]
+        # one update per filter shape: the Kalman / IMM update is the same for every
+        # class of one shape (the class only decides the prediction)
+        by_shape: dict[tuple[int, int], list[int]] = {}
+        for p, i in enumerate(ii.tolist()):
+            by_shape.setdefault(predicted.shape(i), []).append(p)
         classes = self.knowledge.classes
         d = self.dim
-        for cls, pairs in by_class.items():
-            flt = self.factory.filter_for(cls)
+        label_error = self.log_label_error
+        for pairs_list in by_shape.values():
+            pairs = np.asarray(pairs_list)
             rows_i = ii[pairs]
             rows_j = jj[pairs]
             R_rows = R_pair[pairs]
             x, P, mu = predicted.stacked(rows_i)
-            x_new, P_new, mu_new, log_lik = flt.update(x, P, mu, z[rows_j], R_rows)
+            x_new, P_new, mu_new, log_lik = batched.update(x, P, mu, z[rows_j], R_rows)
             if self.model == "paper":
-                x_hat, _ = flt.combine(x_new, P_new, mu_new)
+                x_hat, _ = batched.combine(x_new, P_new, mu_new)
                 delta = z[rows_j] - x_hat[:, :d]
                 log_lik = -0.5 * mahalanobis_squared(delta, R_rows)
             elif labelled is not None and labelled[rows_j, rows_i].any():
                 log_lik = self._label_robust(
                     log_lik, labelled[rows_j, rows_i], diff, rows_j, rows_i, predicted, R_rows
                 )
-            if mht:  # Bayes over the class distribution (semwm.mhf.classes)
-                posteriors = probs[rows_i] * reported[rows_j]
-                posteriors /= posteriors.sum(axis=1, keepdims=True)
-                names = self.class_model.names
-                refined_all = [names[k] for k in self.class_model.published_many(posteriors)]
             # one conversion per batch, not one numpy scalar per pair
             pair_likelihood = likelihood[rows_j, rows_i].tolist()
             pair_log_lik = log_lik.tolist()
             states = zip(list(x_new), list(P_new), list(mu_new), strict=True)
-            for row, (i, j, (xs, Ps, mus)) in enumerate(
-                zip(rows_i.tolist(), rows_j.tolist(), states, strict=True)
+            for p, i, j, (xs, Ps, mus), lik, log_l in zip(
+                pairs_list,
+                rows_i.tolist(),
+                rows_j.tolist(),
+                states,
+                pair_likelihood,
+                pair_log_lik,
+                strict=True,
             ):
                 old = tracks[i]
                 m = measurements[j]
                 if mht:
-                    class_probs, refined = posteriors[row], refined_all[row]
+                    class_probs, refined = posteriors[p], refined_all[p]
                 else:  # eq. (8): the more specific of two compatible classes
                     refined = self.taxonomy.most_specific(old.cls, m.cls)
                     class_probs = self.class_model.point(refined)
                 if refined != old.cls:
-                    xs, Ps, mus = conform(xs, Ps, mus, flt, self.factory.filter_for(refined))
+                    target = self.factory.filter_for(refined)
+                    xs, Ps, mus = conform(xs, Ps, mus, None, target)
                 rate = classes[refined].detection_frequency
                 updated = Track(
                     new_key(),
@@ -409,11 +420,11 @@ class Associator:
                     class_probs,
                 )
                 f_existing = old.rate if detection_rates is None else detection_rates[m.detector][i]
-                log_num = _log(f_existing) + math.log(pair_likelihood[row]) + pair_log_lik[row]
+                log_num = _log(f_existing) + math.log(lik) + log_l
                 if mht:
                     log_num += _log(existence[i]) if existence else 0.0
                     if m.label is not None and old.label not in (None, m.label):
-                        log_num += self.log_label_error
+                        log_num += label_error
                 found[j][old.key] = (updated, log_num, rate - old.rate)
         return found
 

@@ -27,6 +27,7 @@ nothing confirms are removed, with no competitor needed.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Collection, Mapping, Sequence
 from typing import TYPE_CHECKING
@@ -82,12 +83,20 @@ def inside_probability(
     count = position.shape[0]
     if region is None or count == 0:
         return np.ones(count)
-    low = np.array([a for a, _ in region])
-    high = np.array([b for _, b in region])
+    low, high = _bounds(region)
     sigma = np.sqrt(np.maximum(np.diagonal(covariance, axis1=1, axis2=2), 1e-18))
     per_axis = ndtr((high - position) / sigma) - ndtr((low - position) / sigma)
     result: FloatArray = np.prod(np.clip(per_axis, 0.0, 1.0), axis=1)
     return result
+
+
+@functools.lru_cache(maxsize=64)
+def _bounds(region: Region) -> tuple[FloatArray, FloatArray]:
+    """The region's lower and upper corners as arrays (made once per region)."""
+    low = np.array([a for a, _ in region], dtype=float)
+    high = np.array([b for _, b in region], dtype=float)
+    low.flags.writeable = high.flags.writeable = False
+    return low, high
 
 
 def near_rate(

@@ -66,7 +66,8 @@ class _TrackTable:
         self.existence: dict[int, float] = dict(state.existence)
         self.births: dict[tuple[int, float], Track] = {}
         self.born: set[int] = set()  # detections (their new track's key) that started one
-        self.origin: dict[int, int] = {key: key for key in self.tracks}
+        self.origin: dict[int, int] = {}  # new version -> the pre-scan version it derives from
+        self._first_new = state.next_key  # keys below it existed before the scan
         self.derived: dict[int, list[int]] = {}
         self.copies: dict[int, int] = {}  # pre-scan version -> its copy without label
 
@@ -92,15 +93,20 @@ class _TrackTable:
             self.origin[track.key] = origin
             self.derived.setdefault(origin, []).append(track.key)
 
+    def origin_of(self, key: int) -> int | None:
+        """The pre-scan version ``key`` derives from (itself if it is one), else None."""
+        return key if key < self._first_new else self.origin.get(key)
+
     def unlabeled(self, key: int) -> int:
         """The version of ``key`` that gave its label up (paper 000 III-B: the older of two
         objects with one label gets a new unique label; its id serves as that label)."""
         done = self._unlabeled.get(key)
         if done is None:
             copy = self.tracks[key].relabeled(self.new_key(), None)
-            self.add(copy, self.origin.get(key), key in self.fresh, self.existence[key])
+            origin = self.origin_of(key)
+            self.add(copy, origin, key in self.fresh, self.existence[key])
             done = self._unlabeled[key] = copy.key
-            if key not in self.fresh and self.origin.get(key) == key:
+            if key not in self.fresh and origin == key:
                 self.copies[key] = copy.key
         return done
 
@@ -163,16 +169,11 @@ class MultipleHypothesisFilter:
         missed-detection term.
         """
         classes = self.knowledge.classes
-        mu = np.array(
-            [
-                near_rate(
-                    predicted.position[i],
-                    classes[t.cls].leave_frequency,
-                    self._leave_relations[t.cls],
-                )
-                for i, t in enumerate(predicted.tracks)
-            ]
-        )
+        mu = np.array([classes[t.cls].leave_frequency for t in predicted.tracks], dtype=float)
+        for i, t in enumerate(predicted.tracks):
+            relations = self._leave_relations[t.cls]
+            if relations:  # near a target it leaves by (paper 002 eq. 4, mirrored)
+                mu[i] = near_rate(predicted.position[i], float(mu[i]), relations)
         if not self.missed_detections:
             return mu, np.zeros(len(predicted.tracks))
         inside = predicted.inside_region(self.region)

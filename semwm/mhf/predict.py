@@ -56,10 +56,11 @@ class Predicted:
 
     ``x``, ``P``, ``mu`` are lists of per-track arrays (filters differ in size);
     ``position`` ``(N, d)`` and ``position_covariance`` ``(N, d, d)`` are stacked.
-    ``batches`` holds the same states stacked per class filter (class name ->
+    ``batches`` holds the same states stacked per filter shape (``(M, n)`` ->
     ``(x, P, mu)`` with ``(K, M, n)``, ``(K, M, n, n)``, ``(K, M)``) and
-    ``batch_row[i]`` is track ``i``'s row in its class's batch, so that batched
-    updates index them instead of stacking rows again.
+    ``batch_row[i]`` is track ``i``'s row in its shape's batch, so that batched
+    updates (the same equations for every class of one shape) index them instead of
+    stacking rows again.
     """
 
     tracks: tuple[Track, ...]
@@ -69,7 +70,9 @@ class Predicted:
     state_mean: list[FloatArray]
     position: FloatArray
     position_covariance: FloatArray
-    batches: dict[str, tuple[FloatArray, FloatArray, FloatArray]] = field(default_factory=dict)
+    batches: dict[tuple[int, int], tuple[FloatArray, FloatArray, FloatArray]] = field(
+        default_factory=dict
+    )
     batch_row: IndexArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
     _inside: dict[Region | None, FloatArray] = field(
         default_factory=dict, compare=False, repr=False
@@ -109,10 +112,15 @@ class Predicted:
         )
 
     def stacked(self, rows: IndexArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """``x``, ``P``, ``mu`` of ``rows`` (tracks of one class), stacked."""
-        x, P, mu = self.batches[self.tracks[int(rows[0])].cls]
+        """``x``, ``P``, ``mu`` of ``rows`` (tracks of one filter shape), stacked."""
+        x, P, mu = self.batches[self.shape(int(rows[0]))]
         in_batch = self.batch_row[rows]
         return x[in_batch], P[in_batch], mu[in_batch]
+
+    def shape(self, row: int) -> tuple[int, int]:
+        """``(M, n)``: modes and state size of track ``row``'s filter."""
+        modes, size = self.x[row].shape
+        return modes, size
 
 
 def predict_tracks(tracks: Sequence[Track], time: float, factory: FilterFactory) -> Predicted:
@@ -126,7 +134,8 @@ def predict_tracks(tracks: Sequence[Track], time: float, factory: FilterFactory)
     position = np.zeros((count, d))
     position_covariance = np.zeros((count, d, d))
     batch_row = np.zeros(count, dtype=np.intp)
-    batches: dict[str, tuple[FloatArray, FloatArray, FloatArray]] = {}
+    by_shape: dict[tuple[int, int], list[tuple[list[int], FloatArray, FloatArray, FloatArray]]]
+    by_shape = defaultdict(list)
     groups: dict[str, list[int]] = defaultdict(list)
     for i, track in enumerate(tracks):
         groups[track.cls].append(i)
@@ -149,12 +158,32 @@ def predict_tracks(tracks: Sequence[Track], time: float, factory: FilterFactory)
         idx = np.asarray(members)
         position[idx] = x_hat[:, :d]
         position_covariance[idx] = P_hat[:, :d, :d]
-        batch_row[idx] = np.arange(len(members))
-        batches[cls] = (x, P, mu)
+        by_shape[shape].append((members, x, P, mu))
         for row, i in enumerate(members):
             xs[i], Ps[i], mus[i], means[i] = x[row], P[row], mu[row], x_hat[row]
+    batches = {shape: _stack_shape(parts, batch_row) for shape, parts in by_shape.items()}
     return Predicted(
         tuple(tracks), xs, Ps, mus, means, position, position_covariance, batches, batch_row
+    )
+
+
+def _stack_shape(
+    parts: list[tuple[list[int], FloatArray, FloatArray, FloatArray]], batch_row: IndexArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """One filter shape's batch from its classes' batches; sets ``batch_row`` of their
+    tracks."""
+    if len(parts) == 1:
+        members, x, P, mu = parts[0]
+        batch_row[members] = np.arange(len(members))
+        return x, P, mu
+    start = 0
+    for members, *_ in parts:
+        batch_row[members] = np.arange(start, start + len(members))
+        start += len(members)
+    return (
+        np.concatenate([part[1] for part in parts]),
+        np.concatenate([part[2] for part in parts]),
+        np.concatenate([part[3] for part in parts]),
     )
 
 

@@ -168,20 +168,24 @@ class ObservedRates:
             return result
         base = result.tolist()
         rates: dict[StreamKey, float] = {}
+        done: dict[tuple[int, float], float] = {}  # versions of one object share it
         for i, lineage in enumerate(lineages):
             entries = self.seen.get(lineage)
             if not entries:
                 continue
-            extra = 0.0
-            for stream, last in entries.items():
-                g = rates.get(stream)
-                if g is None:
-                    g = rates[stream] = self.rate(stream)
-                if g <= base[i]:
-                    continue
-                until = last + WINDOW_DETECTIONS / g
-                if until > start:
-                    extra += (g - base[i]) * min((until - start) / span, 1.0)
+            extra = done.get((lineage, base[i]))
+            if extra is None:
+                extra = 0.0
+                for stream, last in entries.items():
+                    g = rates.get(stream)
+                    if g is None:
+                        g = rates[stream] = self.rate(stream)
+                    if g <= base[i]:
+                        continue
+                    until = last + WINDOW_DETECTIONS / g
+                    if until > start:
+                        extra += (g - base[i]) * min((until - start) / span, 1.0)
+                done[(lineage, base[i])] = extra
             result[i] += extra
         return result
 

@@ -66,40 +66,76 @@ def same_estimate(
 
 
 def _same_pairs(
-    versions: list[Track], existence: Mapping[int, float], max_distance: float
+    lineages: Sequence[Sequence[Track]], existence: Mapping[int, float], max_distance: float
 ) -> set[tuple[int, int]]:
-    """The ordered key pairs ``(a, b)`` of versions of one lineage that are the same
-    estimate (:func:`same_estimate`), batched: one inverse and log-determinant per
-    version, then every pair in one numpy expression."""
-    groups: dict[tuple[str, str | None, tuple[int, ...]], list[Track]] = {}
-    for track in versions:  # class, label and state shape must agree
-        groups.setdefault((track.cls, track.label, track.x.shape), []).append(track)
+    """The ordered key pairs ``(a, b)``, ``a != b``, of versions of one lineage
+    (``lineages``: the versions of each) that are the same estimate
+    (:func:`same_estimate`), batched: every version of one state shape in one numpy
+    expression, pairs kept only within one group (lineage, class, label)."""
+    by_shape: dict[tuple[int, ...], tuple[list[Track], list[int]]] = {}
+    group_of: dict[tuple[int, str, str | None], int] = {}
+    for versions in lineages:
+        for track in versions:  # lineage, class, label and state shape must agree
+            gid = group_of.setdefault((track.lineage, track.cls, track.label), len(group_of))
+            members, gids = by_shape.setdefault(track.x.shape, ([], []))
+            members.append(track)
+            gids.append(gid)
     result: set[tuple[int, int]] = set()
-    for members in groups.values():
-        if len(members) < 2:
-            continue
-        x = np.stack([t.x for t in members])  # (V, M, n)
-        P = np.stack([t.P for t in members])  # (V, M, n, n)
-        mu = np.stack([t.mu for t in members])  # (V, M)
-        probs = np.stack([t.class_probs for t in members])  # (V, K)
-        r = np.array([existence.get(t.key, 1.0) for t in members])
-        sign, log_det = np.linalg.slogdet(P)  # (V, M)
-        valid = np.all(sign > 0, axis=1)
-        P_inv = np.linalg.inv(np.where(valid[:, None, None, None], P, np.eye(P.shape[-1])))
-        delta = x[:, None] - x[None, :]  # (a, b, M, n): x_a - x_b
-        d2 = np.einsum("abmi,amij,abmj->abm", delta, P_inv, delta).max(axis=2)
-        same = (
-            (d2 <= max_distance)
-            & (np.abs(log_det[:, None] - log_det[None, :]).max(axis=2) <= LOG_DET_TOLERANCE)
-            & (np.abs(r[:, None] - r[None, :]) <= PROBABILITY_TOLERANCE)
-            & (np.abs(mu[:, None] - mu[None, :]).max(axis=2) <= PROBABILITY_TOLERANCE)
-            & (np.abs(probs[:, None] - probs[None, :]).max(axis=2) <= PROBABILITY_TOLERANCE)
-            & valid[:, None]
-            & valid[None, :]
-        )
-        for i, j in zip(*np.nonzero(same), strict=True):
-            result.add((members[i].key, members[j].key))
+    for members, gids in by_shape.values():
+        for chunk in _chunks(members, gids):
+            result |= _same_in(chunk[0], np.asarray(chunk[1]), existence, max_distance)
     return result
+
+
+_MAX_BATCH = 256  # versions compared in one expression (memory grows with its square)
+
+
+def _chunks(members: list[Track], gids: list[int]) -> list[tuple[list[Track], list[int]]]:
+    """``members`` in batches of whole groups of at most :data:`_MAX_BATCH` versions
+    (one larger group is a batch of its own)."""
+    if len(members) <= _MAX_BATCH:
+        return [(members, gids)]
+    by_group: dict[int, list[Track]] = {}
+    for track, gid in zip(members, gids, strict=True):
+        by_group.setdefault(gid, []).append(track)
+    chunks: list[tuple[list[Track], list[int]]] = [([], [])]
+    for gid, tracks in by_group.items():
+        if chunks[-1][0] and len(chunks[-1][0]) + len(tracks) > _MAX_BATCH:
+            chunks.append(([], []))
+        chunks[-1][0].extend(tracks)
+        chunks[-1][1].extend([gid] * len(tracks))
+    return chunks
+
+
+def _same_in(
+    members: list[Track], gids: np.ndarray, existence: Mapping[int, float], max_distance: float
+) -> set[tuple[int, int]]:
+    """:func:`_same_pairs` of versions of one state shape, group ids ``gids``."""
+    if len(members) < 2:
+        return set()
+    x = np.stack([t.x for t in members])  # (V, M, n)
+    P = np.stack([t.P for t in members])  # (V, M, n, n)
+    mu = np.stack([t.mu for t in members])  # (V, M)
+    probs = np.stack([t.class_probs for t in members])  # (V, K)
+    r = np.array([existence.get(t.key, 1.0) for t in members])
+    sign, log_det = np.linalg.slogdet(P)  # (V, M)
+    valid = np.all(sign > 0, axis=1)
+    P_inv = np.linalg.inv(np.where(valid[:, None, None, None], P, np.eye(P.shape[-1])))
+    delta = x[:, None] - x[None, :]  # (a, b, M, n): x_a - x_b
+    d2 = np.einsum("abmi,amij,abmj->abm", delta, P_inv, delta).max(axis=2)
+    same = (
+        (gids[:, None] == gids[None, :])
+        & (d2 <= max_distance)
+        & (np.abs(log_det[:, None] - log_det[None, :]).max(axis=2) <= LOG_DET_TOLERANCE)
+        & (np.abs(r[:, None] - r[None, :]) <= PROBABILITY_TOLERANCE)
+        & (np.abs(mu[:, None] - mu[None, :]).max(axis=2) <= PROBABILITY_TOLERANCE)
+        & (np.abs(probs[:, None] - probs[None, :]).max(axis=2) <= PROBABILITY_TOLERANCE)
+        & valid[:, None]
+        & valid[None, :]
+    )
+    np.fill_diagonal(same, False)  # a version is trivially itself
+    keys = [t.key for t in members]
+    return {(keys[i], keys[j]) for i, j in zip(*np.nonzero(same), strict=True)}
 
 
 def merge_similar(
@@ -125,10 +161,9 @@ def merge_similar(
                 for key in hypotheses[index].tracks:
                     track = tracks[key]
                     by_lineage.setdefault(track.lineage, {})[key] = track
-    same: set[tuple[int, int]] = set()
-    for of_lineage in by_lineage.values():
-        if len(of_lineage) > 1:
-            same |= _same_pairs(list(of_lineage.values()), existence, max_distance)
+    same = _same_pairs(
+        [list(v.values()) for v in by_lineage.values() if len(v) > 1], existence, max_distance
+    )
     if not same:
         return tuple(hypotheses)
     weights = [h.log_weight for h in hypotheses]

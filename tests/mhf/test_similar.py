@@ -70,27 +70,34 @@ def test_twins_merge_into_the_more_probable_and_probabilities_add() -> None:
     assert merge_similar(hypotheses, tracks, {}, 0.0) == hypotheses  # 0 turns it off
 
 
-def test_the_batched_pairs_agree_with_the_pairwise_definition() -> None:
-    from semwm.mhf.similar import _same_pairs
+def test_the_batched_pairs_agree_with_the_pairwise_definition(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from semwm.mhf import similar
 
     rng = np.random.default_rng(3)
     versions = [
         version(
             k,
-            7,
+            7 + k % 3,  # three lineages, compared in one batch: never paired across them
             float(rng.choice([0.0, 0.005, 0.02, 0.2])),
             variance=float(rng.choice([0.01, 0.0101, 0.02])),
             label=rng.choice([None, "peer1"], p=[0.8, 0.2]),
         )
-        for k in range(12)
+        for k in range(30)
     ]
-    existence = {k: float(rng.choice([1.0, 0.995, 0.9])) for k in range(12)}
-    batched = _same_pairs(versions, existence, 0.01)
+    existence = {k: float(rng.choice([1.0, 0.995, 0.9])) for k in range(30)}
+    lineages = [[v for v in versions if v.lineage == lineage] for lineage in (7, 8, 9)]
+    batched = similar._same_pairs(lineages, existence, 0.01)
     pairwise = {
         (a.key, b.key)
         for a in versions
         for b in versions
-        if same_estimate(a, b, existence[a.key], existence[b.key], 0.01)
+        if a.lineage == b.lineage
+        and a.key != b.key
+        and same_estimate(a, b, existence[a.key], existence[b.key], 0.01)
     }
     assert batched == pairwise
-    assert len({(a, b) for a, b in pairwise if a != b}) > 0  # some twins to find
+    assert len(pairwise) > 0  # some twins to find
+    monkeypatch.setattr(similar, "_MAX_BATCH", 4)  # batches of whole groups
+    assert similar._same_pairs(lineages, existence, 0.01) == pairwise
