@@ -120,9 +120,13 @@ def _stored_positions(tracks: Sequence[Track], dim: int) -> tuple[FloatArray, Fl
     for i, track in enumerate(tracks):
         groups.setdefault(track.x.shape, []).append(i)
     for rows in groups.values():  # one batched call per filter shape
-        x = np.stack([tracks[i].x[:, :dim] for i in rows])  # (N, M, d)
-        P = np.stack([tracks[i].P[:, :dim, :dim] for i in rows])
-        mu = np.stack([tracks[i].mu for i in rows])  # (N, M)
+        x = np.array([tracks[i].x for i in rows])[:, :, :dim]  # (N, M, d)
+        P = np.array([tracks[i].P for i in rows])[:, :, :dim, :dim]
+        if x.shape[1] == 1:  # one mode: nothing to combine
+            position[rows] = x[:, 0]
+            covariance[rows] = P[:, 0]
+            continue
+        mu = np.array([tracks[i].mu for i in rows])  # (N, M)
         position[rows] = np.einsum("nm,nmd->nd", mu, x)
         covariance[rows] = np.einsum("nm,nmij->nij", mu, P)
     return position, covariance
@@ -688,7 +692,9 @@ class WorldModel:
         delta = x[:, None, :] - x[None, :, :]
         spread = np.trace(P, axis1=1, axis2=2)
         near = (delta * delta).sum(-1) <= _SAME_OBJECT_GATE * (spread[:, None] + spread[None, :])
-        aa, bb = np.nonzero(np.triu(near, k=1))
+        aa, bb = np.nonzero(near)
+        upper = aa < bb  # each pair once
+        aa, bb = aa[upper], bb[upper]
         d2 = mahalanobis_squared(delta[aa, bb], P[aa] + P[bb])
         close = d2 <= _SAME_OBJECT_GATE
         for a, b in zip(aa[close].tolist(), bb[close].tolist(), strict=True):

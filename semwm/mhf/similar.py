@@ -113,10 +113,10 @@ def _same_in(
     """:func:`_same_pairs` of versions of one state shape, group ids ``gids``."""
     if len(members) < 2:
         return set()
-    x = np.stack([t.x for t in members])  # (V, M, n)
-    P = np.stack([t.P for t in members])  # (V, M, n, n)
-    mu = np.stack([t.mu for t in members])  # (V, M)
-    probs = np.stack([t.class_probs for t in members])  # (V, K)
+    x = np.array([t.x for t in members])  # (V, M, n)
+    P = np.array([t.P for t in members])  # (V, M, n, n)
+    mu = np.array([t.mu for t in members])  # (V, M)
+    probs = np.array([t.class_probs for t in members])  # (V, K)
     r = np.array([existence.get(t.key, 1.0) for t in members])
     sign, log_det = np.linalg.slogdet(P)  # (V, M)
     valid = np.all(sign > 0, axis=1)
