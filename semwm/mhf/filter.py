@@ -43,6 +43,8 @@ from semwm.mhf.rates import ObservedRates
 from semwm.mhf.similar import merge_similar
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
 
+_NO_LIMITS = (math.inf, math.inf)
+
 
 class _TrackTable:
     """The scan's working track table: new versions get keys here.
@@ -137,6 +139,14 @@ class MultipleHypothesisFilter:
             else None
         )
         self.region = world.region
+        # per class: (P_max, longest time unseen), infinite when the class sets none
+        self._limits = {
+            name: (
+                math.inf if spec.max_position_variance is None else spec.max_position_variance,
+                math.inf if spec.max_time_without_update is None else spec.max_time_without_update,
+            )
+            for name, spec in knowledge.classes.items()
+        }
         self.removal_existence = world.removal_existence if self.mht else 0.0
         self._leave_relations = {
             name: tuple(
@@ -215,31 +225,25 @@ class MultipleHypothesisFilter:
         above the class's P_max (paper 002 III-E), unseen longer than its maximum (C3),
         and (``mht``) existence inside the region below ``removal_existence``."""
         gone: set[int] = set()
-        if not predicted.tracks:
+        tracks = predicted.tracks
+        if not tracks:
             return gone
-        if self.mht and existence is not None:
-            inside = predicted.inside_region(self.region)
-            for i, track in enumerate(predicted.tracks):
-                if existence.get(track.key, 1.0) * inside[i] < self.removal_existence:
-                    gone.add(track.key)
-        finite = np.all(np.isfinite(predicted.position_covariance), axis=(1, 2))
-        for row in np.flatnonzero(~finite):
-            gone.add(predicted.tracks[int(row)].key)
-        covariance = np.where(finite[:, None, None], predicted.position_covariance, 0.0)
-        largest = largest_eigenvalue(covariance)
         classes = self.knowledge.classes
-        for i, track in enumerate(predicted.tracks):
-            spec = classes.get(track.cls)
-            if spec is None:
-                gone.add(track.key)
-                continue
-            if (
-                spec.max_position_variance is not None and largest[i] > spec.max_position_variance
-            ) or (
-                spec.max_time_without_update is not None
-                and time - track.last_seen > spec.max_time_without_update
-            ):
-                gone.add(track.key)
+        drop = np.array([t.cls not in classes for t in tracks])  # a class since removed
+        if self.mht and existence is not None:
+            r = np.array([existence.get(t.key, 1.0) for t in tracks])
+            drop |= r * predicted.inside_region(self.region) < self.removal_existence
+        finite = np.all(np.isfinite(predicted.position_covariance), axis=(1, 2))
+        drop |= ~finite
+        covariance = np.where(finite[:, None, None], predicted.position_covariance, 0.0)
+        limits = [self._limits.get(t.cls, _NO_LIMITS) for t in tracks]
+        max_variance = np.array([limit[0] for limit in limits])
+        max_unseen = np.array([limit[1] for limit in limits])
+        last_seen = np.array([t.last_seen for t in tracks])
+        drop |= largest_eigenvalue(covariance) > max_variance  # P_max, paper 002 III-E
+        drop |= time - last_seen > max_unseen  # paper 000 C3
+        for row in np.flatnonzero(drop).tolist():
+            gone.add(tracks[row].key)
         return gone
 
     def process_scan(
