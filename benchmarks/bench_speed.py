@@ -432,22 +432,28 @@ def markdown(doc: dict[str, Any]) -> str:
                 f"{fmt(c['us_per_detection'])} | {fmt(c['peak_traced_mb'])} | "
                 f"{c['hypotheses']} | {c['objects']} | {c['status']} |"
             )
-    lines += [
-        "",
-        "## A team's stream in process (issue 15's load without HTTP)",
-        "",
-        "5 robots x 10 detections x 30 Hz on 20 shared objects (`sim1.yaml`, "
-        "`bench_teamload`'s layout), one `ingest` per robot's batch, 6 s; CPU after 150 "
-        "warm-up batches. Real time needs at most 6.67 ms per batch on one core.",
-        "",
-        "| core | batches | CPU ms/batch | µs/det | det/s one core sustains | objects | "
-        "hypotheses |",
-        "|---|---|---|---|---|---|---|",
+    streams = [
+        (label, core["team_stream"])
+        for label, core in ([("baseline", base)] if base else []) + [("current", current)]
+        if core.get("team_stream") is not None
     ]
-    for label, core in ([("baseline", base)] if base else []) + [("current", current)]:
-        t = core.get("team_stream")
-        if t is None:
-            continue
+    lines += (
+        []
+        if not streams
+        else [
+            "",
+            "## A team's stream in process (issue 15's load without HTTP)",
+            "",
+            "5 robots x 10 detections x 30 Hz on 20 shared objects (`sim1.yaml`, "
+            "`bench_teamload`'s layout), one `ingest` per robot's batch, 6 s; CPU after 150 "
+            "warm-up batches. Real time needs at most 6.67 ms per batch on one core.",
+            "",
+            "| core | batches | CPU ms/batch | µs/det | det/s one core sustains | objects | "
+            "hypotheses |",
+            "|---|---|---|---|---|---|---|",
+        ]
+    )
+    for label, t in streams:
         lines.append(
             f"| {label} | {t['batches']} | {fmt(t['cpu_ms_per_batch'])} | "
             f"{fmt(t['cpu_us_per_detection'])} | {fmt(1e6 / t['cpu_us_per_detection'])} | "
