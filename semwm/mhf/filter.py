@@ -408,7 +408,10 @@ class MultipleHypothesisFilter:
                 self.ratio,
                 self.max_hypotheses,
             )
-            result.extend(self._split(hypotheses, tracks))
+            if len(hypotheses) == len(cluster.hypotheses) and not _common(hypotheses):
+                result.append(Cluster(hypotheses, cluster.keys))  # the same objects
+            else:
+                result.extend(self._split(hypotheses, tracks))
         return tuple(result)
 
     def without(
@@ -617,6 +620,17 @@ def _product(
             max_hypotheses,
         )
     return result
+
+
+def _common(hypotheses: Sequence[Hypothesis]) -> bool:
+    """Whether some object is held by every hypothesis (the cluster splits)."""
+    first, *others = hypotheses
+    common = set(first.tracks)
+    for h in others:
+        common &= h.tracks
+        if not common:
+            return False
+    return bool(common)
 
 
 def _give_label(
