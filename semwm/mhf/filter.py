@@ -296,6 +296,11 @@ class MultipleHypothesisFilter:
                 touched = book.owners(involved)
             else:
                 touched = book.ids()
+            certain = self._certain_update(book, touched, option, table)
+            if certain is not None:
+                book.take(touched)
+                book.put((certain,))
+                continue
             merged = _product(book.take(touched), self.ratio, self.max_hypotheses)
             expanded = self._expand(merged, option, table)
             book.put(self._split(expanded, table.tracks))
@@ -542,6 +547,34 @@ class MultipleHypothesisFilter:
             return tuple(hypotheses)
         return prune(merge(children), self.ratio, self.max_hypotheses)
 
+    def _certain_update(
+        self, book: _ClusterBook, touched: set[int], option: DetectionOptions, table: _TrackTable
+    ) -> Cluster | None:
+        """The cluster :meth:`_expand` and :meth:`_split` would give, computed directly in
+        the most common case (``mht``): the detection gates exactly one object, which is
+        alone and certain in its cluster, and "new object or clutter" falls below eq.
+        (3)'s floor against the update. Then the only child is the updated object, with
+        probability 1. ``None`` in every other case (the general path decides)."""
+        if not self.mht or self.ratio <= 0.0 or len(touched) != 1 or len(option.existing) != 1:
+            return None
+        if option.presence or option.measurement.label is not None:
+            return None
+        cluster = book.get(next(iter(touched)))
+        if len(cluster.hypotheses) != 1 or len(cluster.keys) != 1:
+            return None
+        ((old_key, (updated, log_num, _)),) = option.existing.items()
+        if old_key not in cluster.keys or old_key in table.copies:
+            return None
+        log_norm = cluster.hypotheses[0].log_weight
+        log_update = log_norm + log_num
+        if log_update == -math.inf:
+            return None
+        log_unassigned = log_norm + log_add(option.log_clutter, option.new_log)
+        if log_unassigned >= log_update + math.log(self.ratio):
+            return None  # both children are kept: the general path
+        key = updated.key
+        return Cluster((Hypothesis(0.0, frozenset({key}), updated.rate),), frozenset({key}))
+
     def _birth(self, option: DetectionOptions, birth_log: float, table: _TrackTable) -> int:
         """The version a detection starts with birth weight ``birth_log`` (``mht``): its
         existence is ``lambda_b / (lambda_b + lambda_c)``. Hypotheses whose objects make
@@ -571,6 +604,9 @@ class _ClusterBook:
 
     def ids(self) -> set[int]:
         return set(self._clusters)
+
+    def get(self, cluster_id: int) -> Cluster:
+        return self._clusters[cluster_id]
 
     def owners(self, keys: set[int]) -> set[int]:
         owner = self._owner
