@@ -41,6 +41,23 @@ def test_updated_sends_an_object_once_per_update_all_every_time(knowledge) -> No
     assert again.size == len(json.dumps(again.body, separators=(",", ":")).encode())
 
 
+def test_new_only_reports_just_the_objects_never_sent(knowledge) -> None:  # type: ignore[no-untyped-def]
+    local = LocalModel("r1", knowledge, Strategy.UPDATED)
+    assert local.report(new_only=True) is None  # an empty local world
+    for t in (0.0, 0.1, 0.2):
+        local.ingest([cup(t)])
+    first = local.report(new_only=True)
+    assert first is not None and [d["class"] for d in first.detections] == ["Cup"]
+    table = {"class": "Table", "position": [3.0, 2.0], "source": "r1"}
+    for t in (0.3, 0.4, 0.5):
+        local.ingest([cup(t), {**table, "time": t}])
+    new = local.report(new_only=True)  # the cup was updated but is not new
+    assert new is not None and [d["class"] for d in new.detections] == ["Table"]
+    assert local.report(new_only=True) is None
+    due = local.report()  # the period's report: the cup's update (the table was sent)
+    assert due is not None and [d["class"] for d in due.detections] == ["Cup"]
+
+
 def test_ci_doubles_the_covariance(knowledge) -> None:  # type: ignore[no-untyped-def]
     ci = LocalModel("r1", knowledge, Strategy.CI)
     for t in (0.0, 0.1, 0.2):
