@@ -28,7 +28,11 @@
 
 ``levels=1``: every detection is a message to one model. ``levels=2``: each robot
 feeds its local model directly (its own clock) and every ``report_period`` sends a
-report (:mod:`semwm.team`) to the global model. The world evaluated at every truth
+report (:mod:`semwm.team`) to the global model (and at once, between reports, the
+objects its local model has not reported yet), from a start drawn per robot in
+the first period (robots do not report in step with each other or with the
+evaluation times: in step, every report would be sent exactly at an evaluation
+time and never be in the world evaluated then). The world evaluated at every truth
 time is the receiver's (flat or global) model. CPU time per level is
 :func:`time.process_time` around each level's work.
 """
@@ -167,7 +171,9 @@ def run_team(
         reorder_window=net.hold_time if reorder else 0.0,
     )
     locals_ = {s: LocalModel(s, knowledge, strategy) for s in sources} if levels == 2 else {}
-    next_report = dict.fromkeys(sources, -math.inf)
+    phase_rng = np.random.default_rng(20_000 + seed)
+    phase = {s: float(phase_rng.uniform(0.0, report_period)) for s in sources}
+    next_report: dict[str, float] = {}
     cpu_local = 0.0
     messages: list[_Message] = []
     seq = 0
@@ -185,10 +191,13 @@ def run_team(
         start = clock.process_time()
         local = locals_[source]
         local.ingest(stamped)
+        next_report.setdefault(source, t + phase[source])
         report = None
         if t >= next_report[source] - 1e-9:
             next_report[source] = t + report_period
             report = local.report()
+        else:
+            report = local.report(new_only=True)
         cpu_local += clock.process_time() - start
         if report is not None:
             n_messages += 1
