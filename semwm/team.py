@@ -142,9 +142,13 @@ class LocalModel:
         self.model.reset()
         self._sent = {}
 
-    def report(self, time: float | None = None) -> Report | None:
+    def report(self, time: float | None = None, *, new_only: bool = False) -> Report | None:
         """The report at ``time`` (local clock; default the latest local time), or
-        ``None`` when there is nothing to send. Remembers what it sent."""
+        ``None`` when there is nothing to send. Remembers what it sent.
+
+        ``new_only``: only objects never reported (a robot sends a new object at once
+        rather than at its next report: the global model would otherwise learn of it
+        a report period late)."""
         state = self.model.world(time=time)
         if state.time is None:
             return None
@@ -155,6 +159,8 @@ class LocalModel:
         for obj in state.objects:
             alive.add(obj.id)
             sent = self._sent.get(obj.id)
+            if new_only and sent is not None:
+                continue
             item = self._item(obj, sent, at)
             if item is None:
                 continue

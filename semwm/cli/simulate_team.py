@@ -56,6 +56,13 @@ def add_team_options(parser: argparse.ArgumentParser) -> None:
     )
     team.add_argument("--no-sync", action="store_true", help="do not estimate clock offsets")
     team.add_argument(
+        "--receiver",
+        default="reorder",
+        choices=("reorder", "hold"),
+        help="reorder: process on arrival, replaying within the reorder window (the "
+        "service); hold: a sorting buffer, phase-sensitive (docs/team.md)",
+    )
+    team.add_argument(
         "--strategy",
         default="updated",
         choices=("all", "updated", "ci", "information"),
@@ -73,7 +80,12 @@ def simulate_team(
     """Run the team simulation, write the run and the ``team`` part of metrics.json."""
     from semwm.sim.team_run import Network, run_team
 
-    network = Network(max_offset=args.clock_offset, latency=args.latency, sync=not args.no_sync)
+    network = Network(
+        max_offset=args.clock_offset,
+        latency=args.latency,
+        sync=not args.no_sync,
+        receiver=args.receiver,
+    )
     team = run_team(
         scenario,
         knowledge,

@@ -9,13 +9,30 @@
 * with ``sync`` the receiver estimates each clock with :mod:`semwm.clock` from
   simulated exchanges (five at start, then every ``sync_period`` s, each direction
   its own latency) and places stamps on its clock (:mod:`semwm.sources`);
-* the receiver holds what arrives for ``hold`` s and processes it in time order
-  (paper 001 sorts shared measurements by timestamp); what arrives older than the
-  last processed time is late and dropped (counted).
+* the receiver processes what arrives in time order (paper 001 sorts shared
+  measurements by timestamp), in one of two ways (``Network.receiver``):
+
+  - ``"reorder"`` (default, what the service does): every message is processed on
+    arrival by a world with a reorder window of ``hold`` s, which replays the later
+    scans when an older one arrives; older than the window is late and dropped;
+  - ``"hold"``: a sorting buffer; a message is processed once its (placed) stamp is
+    ``hold`` s old; what is older than the last processed time is late and dropped.
+
+  ``"hold"`` makes accuracy depend on the phase of the stamps: the world evaluated
+  at ``now`` holds a message stamped ``now - hold`` but not one stamped a
+  microsecond later, which waits for the next evaluation. In the simulated
+  scenarios scans, reports and truth frames share one time grid, so with ideal
+  clocks every report lands exactly on that boundary, while any clock error (even
+  1 µs, of either sign) makes half the sources' reports wait one more report period
+  (docs/team.md, section 4);
 
 ``levels=1``: every detection is a message to one model. ``levels=2``: each robot
 feeds its local model directly (its own clock) and every ``report_period`` sends a
-report (:mod:`semwm.team`) to the global model. The world evaluated at every truth
+report (:mod:`semwm.team`) to the global model (and at once, between reports, the
+objects its local model has not reported yet), from a start drawn per robot in
+the first period (robots do not report in step with each other or with the
+evaluation times: in step, every report would be sent exactly at an evaluation
+time and never be in the world evaluated then). The world evaluated at every truth
 time is the receiver's (flat or global) model. CPU time per level is
 :func:`time.process_time` around each level's work.
 """
@@ -27,7 +44,7 @@ import math
 import time as clock
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -48,8 +65,10 @@ class Network:
     """Clocks and links of the team.
 
     ``max_offset``: clocks are off by up to this (s); ``latency``: one-way delay range
-    (s); ``sync``: estimate the offsets; ``hold``: the receiver's sorting delay (s),
-    by default the largest latency plus 50 ms (0 without latency).
+    (s); ``sync``: estimate the offsets; ``hold``: the receiver's reorder window or
+    sorting delay (s), by default the largest latency plus 50 ms (0 without
+    latency); ``receiver``: ``"reorder"`` (process on arrival, replay within
+    ``hold``) or ``"hold"`` (sorting buffer; see the module docstring).
     """
 
     max_offset: float = 0.0
@@ -57,6 +76,11 @@ class Network:
     sync: bool = True
     sync_period: float = 0.2
     hold: float | None = None
+    receiver: Literal["reorder", "hold"] = "reorder"
+
+    def __post_init__(self) -> None:
+        if self.receiver not in ("reorder", "hold"):
+            raise ValueError(f"receiver must be 'reorder' or 'hold'; got {self.receiver!r}")
 
     @property
     def hold_time(self) -> float:
@@ -141,9 +165,15 @@ def run_team(
         return float(rng.uniform(low, high)) if high > 0 else 0.0
 
     strategy = Strategy(strategy)
-    receiver = WorldModel(global_knowledge(knowledge) if levels == 2 else knowledge)
+    reorder = net.receiver == "reorder"
+    receiver = WorldModel(
+        global_knowledge(knowledge) if levels == 2 else knowledge,
+        reorder_window=net.hold_time if reorder else 0.0,
+    )
     locals_ = {s: LocalModel(s, knowledge, strategy) for s in sources} if levels == 2 else {}
-    next_report = dict.fromkeys(sources, -math.inf)
+    phase_rng = np.random.default_rng(20_000 + seed)
+    phase = {s: float(phase_rng.uniform(0.0, report_period)) for s in sources}
+    next_report: dict[str, float] = {}
     cpu_local = 0.0
     messages: list[_Message] = []
     seq = 0
@@ -161,10 +191,13 @@ def run_team(
         start = clock.process_time()
         local = locals_[source]
         local.ingest(stamped)
+        next_report.setdefault(source, t + phase[source])
         report = None
         if t >= next_report[source] - 1e-9:
             next_report[source] = t + report_period
             report = local.report()
+        else:
+            report = local.report(new_only=True)
         cpu_local += clock.process_time() - start
         if report is not None:
             n_messages += 1
@@ -197,7 +230,8 @@ def run_team(
                 syncs.append((t3, s, Exchange(t - offsets[s], t2, t3, t3 + back - offsets[s])))
     syncs.sort(key=lambda e: (e[0], e[1]))
 
-    # 3. the receiver: place, hold, process in time order, evaluate at truth times
+    # 3. the receiver: syncs and messages in arrival order; place, then process on
+    #    arrival (reorder) or once held (hold); evaluate at truth times
     registry = SourceRegistry(TimeGuard(max_ahead=None, max_jump=None))
     messages.sort()
     buffer: list[tuple[float, str, int, list[Detection]]] = []
@@ -207,31 +241,41 @@ def run_team(
     last_processed = -math.inf
     m_i = s_i = 0
     hold = net.hold_time
+
+    def process(scan: list[Detection]) -> int:
+        """Ingest ``scan``; the detections dropped as late."""
+        nonlocal last_processed
+        if not reorder and scan[0].time < last_processed - 1e-9:
+            return len(scan)
+        try:
+            receiver.ingest(scan)
+        except OutOfOrderError:
+            return len(scan)
+        last_processed = max(last_processed, scan[0].time)
+        return 0
+
     for frame in scenario.truth:
         now = frame.time
-        while s_i < len(syncs) and syncs[s_i][0] <= now:
-            registry.sync(syncs[s_i][1], syncs[s_i][2])
-            s_i += 1
-        while m_i < len(messages) and messages[m_i].arrival <= now:
+        start = clock.process_time()
+        while True:
+            sync_at = syncs[s_i][0] if s_i < len(syncs) else math.inf
+            arrival = messages[m_i].arrival if m_i < len(messages) else math.inf
+            if min(sync_at, arrival) > now:
+                break
+            if sync_at <= arrival:
+                registry.sync(syncs[s_i][1], syncs[s_i][2])
+                s_i += 1
+                continue
             m = messages[m_i]
             m_i += 1
             placement = registry.place(m.detections)
             placed = [d for d in placement.detections if isinstance(d, Detection)]
-            heapq.heappush(buffer, (placed[0].time, m.source, m.seq, placed))
-        due: list[list[Detection]] = []
+            if reorder:
+                late += process(placed)
+            else:
+                heapq.heappush(buffer, (placed[0].time, m.source, m.seq, placed))
         while buffer and buffer[0][0] <= now - hold + 1e-9:
-            due.append(heapq.heappop(buffer)[3])
-        start = clock.process_time()
-        for scan in due:
-            if scan[0].time < last_processed - 1e-9:
-                late += len(scan)
-                continue
-            try:
-                receiver.ingest(scan)
-            except OutOfOrderError:
-                late += len(scan)
-                continue
-            last_processed = scan[0].time
+            late += process(heapq.heappop(buffer)[3])
         worlds.append(receiver.world(time=now) if receiver.latest_time is not None else
                       WorldState(time=now, objects=()))  # fmt: skip
         cpu_global += clock.process_time() - start
