@@ -50,16 +50,16 @@ def imm_mix(
     if x.shape[1] == 1:
         return x, P, mu
     T3 = T[None, :, :] if T.ndim == 2 else T
-    cbar = np.einsum("ni,nij->nj", mu, np.broadcast_to(T3, (mu.shape[0], *T3.shape[1:])))
+    cbar = (mu[:, None, :] @ T3)[:, 0, :]  # (N, j)
     reachable = cbar > 0.0
     omega = T3 * mu[:, :, None] / np.where(reachable, cbar, 1.0)[:, None, :]
     # a mode nobody can reach starts from the mixture (its probability is 0 anyway)
     omega = np.where(reachable[:, None, :], omega, mu[:, :, None])  # (N, i, j)
-    x0 = np.einsum("nij,nik->njk", omega, x)
+    x0 = np.swapaxes(omega, 1, 2) @ x  # (N, j, n)
     spread = x[:, :, None, :] - x0[:, None, :, :]  # (N, i, j, n)
-    P0 = np.einsum("nij,nikl->njkl", omega, P) + np.einsum(
-        "nij,nijk,nijl->njkl", omega, spread, spread
-    )
+    # matmul and broadcasting, not einsum: a few µs less per call on tiny stacks
+    outer = spread[..., :, None] * spread[..., None, :]  # (N, i, j, n, n)
+    P0 = (omega[:, :, :, None, None] * (P[:, :, None] + outer)).sum(axis=1)
     return x0, P0, cbar
 
 
