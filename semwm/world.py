@@ -289,7 +289,7 @@ class WorldModel:
         used = [
             m
             for m, d in zip(measurements, parsed, strict=True)
-            if not out_of_range(d, self._knowledge)
+            if not out_of_range(d, self._knowledge, m.R)
         ]
         ignored = len(measurements) - len(used)
         latest = self._state.time
