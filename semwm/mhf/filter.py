@@ -527,6 +527,11 @@ class MultipleHypothesisFilter:
                     children.append((child, log_norm + birth_log, h.rate + new_rate))
             for k in existing_keys & tracks:
                 updated, log_num, rate_change = existing[k]
+                if self.mht and labelled and k not in holders and table.tracks[k].label is None:
+                    # an unlabelled object takes the label from its holder: another
+                    # explanation than the holder, it pays the label error too (the
+                    # associator charges objects holding a different label)
+                    log_num += self.associator.log_label_error
                 child = (tracks - {k}) | {updated.key}
                 if labelled:
                     child = _give_label(child, updated.key, holders, table)
