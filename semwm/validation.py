@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
 from pydantic import TypeAdapter, ValidationError
+from scipy.special import chdtri
 
 from semwm.detection import Detection, DetectionError, DetectionProblem
 from semwm.filters.factory import FilterFactory
@@ -141,10 +143,28 @@ def check(
     return measurements
 
 
-def out_of_range(det: Detection, knowledge: Knowledge) -> bool:
-    """Paper 000 C2: the detection lies outside its detector's range from the sensor."""
+def out_of_range(det: Detection, knowledge: Knowledge, R: np.ndarray | None = None) -> bool:
+    r"""Paper 000 C2: the detection lies outside its detector's range from the sensor.
+
+    ``range`` bounds where the detector sees an *object*; the position it reports
+    carries the measurement noise ``R``, so an object just inside the range is
+    reported beyond it about half the time. Cutting at ``range`` itself would drop
+    those reports and bias every object near the edge of view towards the sensor.
+    With ``R`` the cut is at the range plus the gate's quantile of the noise along
+    the line of sight (:math:`u` the unit vector from the sensor, :math:`\gamma` the
+    one-dimensional chi-square quantile of ``world.gate_probability``):
+
+    .. math:: \lVert z - s \rVert > r + \sqrt{\gamma\, u^\top R\, u}
+    """
     detector = knowledge.detectors[det.detector or knowledge.default_detector]
     if detector.range is None or det.sensor_position is None:
         return False
-    offset = np.asarray(det.position) - np.asarray(det.sensor_position)
-    return bool(np.linalg.norm(offset) > detector.range)
+    offset = np.asarray(det.position, dtype=float) - np.asarray(det.sensor_position, dtype=float)
+    distance = float(np.linalg.norm(offset))
+    margin = 0.0
+    p = knowledge.world.gate_probability
+    if R is not None and distance > 0.0 and p < 1.0:
+        d = min(len(offset), R.shape[0])
+        u = offset[:d] / distance
+        margin = math.sqrt(float(chdtri(1, 1.0 - p)) * max(float(u @ R[:d, :d] @ u), 0.0))
+    return distance > detector.range + margin

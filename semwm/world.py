@@ -293,7 +293,7 @@ class WorldModel:
         used = [
             m
             for m, d in zip(measurements, parsed, strict=True)
-            if not out_of_range(d, self._knowledge)
+            if not out_of_range(d, self._knowledge, m.R)
         ]
         ignored = len(measurements) - len(used)
         latest = self._state.time
@@ -598,6 +598,8 @@ class WorldModel:
         stored = self._stored_summaries(state.tracks)
         totals: dict[int, float] = {}
         chosen: dict[int, Track] = {}
+        present_in: set[int] = set()
+        floor = self._knowledge.world.min_existence
         existence = state.existence
         for cluster in state.clusters:
             # each version's probability mass: the sum over the hypotheses holding it
@@ -608,8 +610,11 @@ class WorldModel:
                     mass[key] = mass.get(key, 0.0) + p
             for key, p in mass.items():  # in order of first appearance
                 track = state.tracks[key]
-                value = p * existence.get(key, 1.0) * stored[key][3]
-                totals[track.lineage] = totals.get(track.lineage, 0.0) + value
+                present = existence.get(key, 1.0) * stored[key][3]
+                totals[track.lineage] = totals.get(track.lineage, 0.0) + p * present
+                if present >= floor and track.lineage not in present_in:
+                    present_in.add(track.lineage)  # see _marginals: not a stale version
+                    chosen[track.lineage] = track
                 chosen.setdefault(track.lineage, track)
         lineages = list(totals)
         dim = self._knowledge.world.dimension
@@ -627,7 +632,6 @@ class WorldModel:
             position,
             covariance,
         )
-        floor = self._knowledge.world.min_existence
         return {lineage: m.track for lineage, m in merged.items() if m.existence >= floor}
 
     def _stored_summaries(
@@ -750,11 +754,13 @@ class WorldModel:
             clusters = state.clusters
             inside = np.ones(len(keys))
         row = {k: i for i, k in enumerate(keys)}
+        floor = self._knowledge.world.min_existence
         gone = self._mhf.leaving(predicted, at, existence if self._mhf.mht else None)
         result: dict[int, _Marginal] = {}
         for cluster in clusters:
             totals: dict[int, float] = {}
             chosen: dict[int, Track] = {}
+            present_in: set[int] = set()
             for h in cluster.hypotheses:  # most probable first
                 p = math.exp(h.log_weight)
                 for key in h.tracks:
@@ -762,9 +768,14 @@ class WorldModel:
                         continue
                     track = state.tracks[key]
                     lineage = track.lineage
-                    totals[lineage] = (
-                        totals.get(lineage, 0.0) + p * existence[key] * inside[row[key]]
-                    )
+                    present = existence[key] * inside[row[key]]
+                    totals[lineage] = totals.get(lineage, 0.0) + p * present
+                    # shown in the most probable hypothesis's version in which it is
+                    # present (existence in the region >= min_existence), not in a
+                    # stale version that left the region long ago
+                    if present >= floor and lineage not in present_in:
+                        present_in.add(lineage)
+                        chosen[lineage] = track
                     chosen.setdefault(lineage, track)
             for lineage, total in totals.items():
                 if lineage not in result or result[lineage].existence < total:

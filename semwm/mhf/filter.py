@@ -191,7 +191,13 @@ class MultipleHypothesisFilter:
         if observed is not None and self.observed_rates:
             f = f * observed.covered(predicted.position, self.sensor_reach, start)
             if excess:
-                f = observed.over([t.lineage for t in predicted.tracks], f, start, end)
+                f = observed.over(
+                    [t.lineage for t in predicted.tracks],
+                    f,
+                    start,
+                    end,
+                    [t.cls for t in predicted.tracks],
+                )
         return mu, f * inside
 
     def class_rates(self, tracks: Sequence[Track]) -> np.ndarray:
@@ -347,8 +353,9 @@ class MultipleHypothesisFilter:
         source = measurements[0].source or ""
         lineages = [t.lineage for t in predicted.tracks]
         base = self.class_rates(predicted.tracks)
+        classes = [t.cls for t in predicted.tracks]
         return {
-            detector: observed.from_stream((source, detector), lineages, base, time)
+            detector: observed.from_stream((source, detector), lineages, base, time, classes)
             for detector in {m.detector for m in measurements}
         }
 
@@ -373,6 +380,7 @@ class MultipleHypothesisFilter:
         detected: dict[str, list[int]] = {}
         born: dict[str, list[int]] = {}
         alive: set[int] = set()
+        classes: dict[int, str] = {}
         for cluster in final:
             for key in cluster.keys:
                 alive.add(table.tracks[key].lineage)
@@ -382,10 +390,11 @@ class MultipleHypothesisFilter:
                 if by is not None:
                     target = detected if lineage in existed else born
                     target.setdefault(by, []).append(lineage)
+                    classes[lineage] = table.tracks[key].cls
         first = options[0].measurement if options else None
         source = (first.source or "") if first is not None else ""
         sensor = None if first is None or first.sensor is None else tuple(first.sensor.tolist())
-        return observed.after_scan(source, time, detected, born, alive, sensor)
+        return observed.after_scan(source, time, detected, born, alive, sensor, classes)
 
     def undetected(
         self,
@@ -531,6 +540,11 @@ class MultipleHypothesisFilter:
                     children.append((child, log_norm + birth_log, h.rate + new_rate))
             for k in existing_keys & tracks:
                 updated, log_num, rate_change = existing[k]
+                if self.mht and labelled and k not in holders and table.tracks[k].label is None:
+                    # an unlabelled object takes the label from its holder: another
+                    # explanation than the holder, it pays the label error too (the
+                    # associator charges objects holding a different label)
+                    log_num += self.associator.log_label_error
                 child = (tracks - {k}) | {updated.key}
                 if labelled:
                     child = _give_label(child, updated.key, holders, table)

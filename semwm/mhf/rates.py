@@ -13,11 +13,18 @@ Each detector of each source (a *stream*, ``(source, detector)``) keeps:
 
 * the source's mean interval between scans :math:`\bar\Delta_s` (an exponential
   moving average over its scans);
-* the fraction :math:`\hat p_{s,d}` of the objects it detected in one scan of the
-  source that it detects again in the next (discounted counts with a Beta(1, 1)
-  prior): its per-scan detection probability for an object in view.
+* per class :math:`c`, the fraction :math:`\hat p_{s,d,c}` of the objects of the
+  class it detected in one scan of the source that it detects again in the next
+  (discounted counts with a Beta prior of two pseudo-counts whose mean is the
+  knowledge's per-scan probability :math:`\min(1, f_c \bar\Delta_s)`): its per-scan
+  detection probability for an object of the class in view.
 
-Its observed rate is :math:`g_{s,d} = \hat p_{s,d} / \bar\Delta_s` (Hz). A stream
+Its observed rate is :math:`g_{s,d,c} = \hat p_{s,d,c} / \bar\Delta_s` (Hz), written
+:math:`g_{s,d}` below for the object's class. Counted per class because one detector
+sees classes at very different rates (a camera that reports a cup in 80% of its
+frames reports a table in 20%): one figure for all would make a rarely detected
+object look missed at the frequent classes' rate and drop it before its next
+detection. A stream
 *sees* an object while its last detection of it is at most
 ``WINDOW_DETECTIONS / g`` old (a few expected detection intervals: an object that
 leaves its view stops counting soon after). With the class rate :math:`f_c`:
@@ -46,6 +53,12 @@ from semwm.filters.motion import FloatArray
 
 StreamKey = tuple[str, str]
 """``(source, detector)``; the source ``""`` for detections that name none."""
+
+CountKey = tuple[str, str, str]
+"""``(source, detector, class)``; the class ``""`` when the caller gave none."""
+
+PRIOR_COUNTS = 2.0
+"""Strength (pseudo-counts) of the prior of a stream's per-scan detection probability."""
 
 WINDOW_DETECTIONS = 3.0
 """A stream sees an object for this many of its expected detection intervals after
@@ -82,30 +95,33 @@ class StreamCounts:
     expected: float = 0.0
     detected: frozenset[int] = frozenset()
 
-    @property
-    def detection_probability(self) -> float:
-        return (self.hits + 1.0) / (self.expected + 2.0)
+    def detection_probability(self, prior: float = 0.5) -> float:
+        """Posterior mean per-scan detection probability, prior mean ``prior``."""
+        return (self.hits + PRIOR_COUNTS * prior) / (self.expected + PRIOR_COUNTS)
 
 
 @dataclass(frozen=True)
 class ObservedRates:
     """What the sources' streams say about detection rates; immutable, one per state.
 
-    ``seen``: lineage -> stream -> time of the stream's last detection of it.
+    ``streams``: per ``(source, detector, class)``, its counts; ``seen``: lineage ->
+    stream -> time of the stream's last detection of it.
     """
 
     sources: Mapping[str, SourceClock] = field(default_factory=dict)
-    streams: Mapping[StreamKey, StreamCounts] = field(default_factory=dict)
+    streams: Mapping[CountKey, StreamCounts] = field(default_factory=dict)
     seen: Mapping[int, Mapping[StreamKey, float]] = field(default_factory=dict)
 
-    def rate(self, stream: StreamKey) -> float:
-        """``g``: the stream's observed rate per object in view (Hz); 0 until its
-        source has scanned twice."""
+    def rate(self, stream: StreamKey, cls: str = "", class_rate: float | None = None) -> float:
+        """``g``: the stream's observed rate per object of class ``cls`` in view (Hz); 0
+        until its source has scanned twice. ``class_rate``: the class's knowledge rate
+        (Hz), the prior's mean (``min(1, f_c * interval)`` per scan); else 1/2 per scan."""
         clock = self.sources.get(stream[0])
-        counts = self.streams.get(stream)
+        counts = self.streams.get((stream[0], stream[1], cls))
         if clock is None or counts is None or not clock.interval:
             return 0.0
-        return counts.detection_probability / clock.interval
+        prior = 0.5 if class_rate is None else min(1.0, class_rate * clock.interval)
+        return counts.detection_probability(prior) / clock.interval
 
     def covered(self, positions: FloatArray, reach: float | None, time: float) -> FloatArray:
         """``(N,)``: 1 where an object at ``positions`` ``(N, d)`` may be seen by some
@@ -137,55 +153,83 @@ class ObservedRates:
         result: FloatArray = near.any(axis=1).astype(float)
         return result
 
+    def _class_rate(
+        self,
+        stream: StreamKey,
+        cls: str,
+        class_rate: float,
+        cache: dict[tuple[str, str, str], float],
+    ) -> float:
+        key = (stream[0], stream[1], cls)
+        g = cache.get(key)
+        if g is None:
+            g = cache[key] = self.rate(stream, cls, class_rate if cls else None)
+        return g
+
     def from_stream(
-        self, stream: StreamKey, lineages: Sequence[int], class_rates: FloatArray, time: float
+        self,
+        stream: StreamKey,
+        lineages: Sequence[int],
+        class_rates: FloatArray,
+        time: float,
+        classes: Sequence[str] | None = None,
     ) -> FloatArray:
         """:math:`f_{s,d}(o)` of each object (Hz) for a detection of ``stream`` at
-        ``time``."""
-        g = self.rate(stream)
-        if g <= 0.0:
+        ``time``; ``classes``: each object's class (else one count for all)."""
+        cache: dict[tuple[str, str, str], float] = {}
+        base = np.asarray(class_rates, dtype=float).tolist()
+        g = np.array(
+            [
+                self._class_rate(stream, "" if classes is None else classes[i], base[i], cache)
+                for i in range(len(lineages))
+            ]
+        )
+        if not np.any(g > 0.0):
             return class_rates
-        window = WINDOW_DETECTIONS / g
-        sees = np.fromiter(
-            (
-                time - self.seen.get(lineage, {}).get(stream, -np.inf) <= window
-                for lineage in lineages
-            ),
-            dtype=bool,
+        window = WINDOW_DETECTIONS / np.where(g > 0.0, g, 1.0)
+        last = np.fromiter(
+            (self.seen.get(lineage, {}).get(stream, -np.inf) for lineage in lineages),
+            dtype=float,
             count=len(lineages),
         )
+        sees = (g > 0.0) & (time - last <= window)
         result: FloatArray = np.where(sees, np.maximum(class_rates, g), class_rates)
         return result
 
     def over(
-        self, lineages: Sequence[int], class_rates: FloatArray, start: float, end: float
+        self,
+        lineages: Sequence[int],
+        class_rates: FloatArray,
+        start: float,
+        end: float,
+        classes: Sequence[str] | None = None,
     ) -> FloatArray:
         """:math:`f(o)` of each object averaged over ``[start, end]`` (Hz): a stream
-        counts for the part of the interval in which it still sees the object."""
+        counts for the part of the interval in which it still sees the object.
+        ``classes``: each object's class (else one count for all)."""
         result = np.array(class_rates, dtype=float, copy=True)
         span = end - start
         if not self.seen or span <= 0.0:
             return result
         base = result.tolist()
-        rates: dict[StreamKey, float] = {}
-        done: dict[tuple[int, float], float] = {}  # versions of one object share it
+        rates: dict[tuple[str, str, str], float] = {}
+        done: dict[tuple[int, str, float], float] = {}  # versions of one object share it
         for i, lineage in enumerate(lineages):
             entries = self.seen.get(lineage)
             if not entries:
                 continue
-            extra = done.get((lineage, base[i]))
+            cls = "" if classes is None else classes[i]
+            extra = done.get((lineage, cls, base[i]))
             if extra is None:
                 extra = 0.0
                 for stream, last in entries.items():
-                    g = rates.get(stream)
-                    if g is None:
-                        g = rates[stream] = self.rate(stream)
+                    g = self._class_rate(stream, cls, base[i], rates)
                     if g <= base[i]:
                         continue
                     until = last + WINDOW_DETECTIONS / g
                     if until > start:
                         extra += (g - base[i]) * min((until - start) / span, 1.0)
-                done[(lineage, base[i])] = extra
+                done[(lineage, cls, base[i])] = extra
             result[i] += extra
         return result
 
@@ -197,13 +241,16 @@ class ObservedRates:
         born: Mapping[str, Iterable[int]],
         alive: frozenset[int] | set[int],
         position: tuple[float, ...] | None = None,
+        classes: Mapping[int, str] | None = None,
     ) -> ObservedRates:
         """The rates after one scan of ``source`` at ``time``.
 
         ``detected``: per detector, the lineages (that existed before the scan) whose
         version in the most probable hypothesis took one of its detections; ``born``:
         per detector, the new lineages it started; ``alive``: every lineage the state
-        holds after the scan; ``position``: where the source's sensor was.
+        holds after the scan; ``position``: where the source's sensor was;
+        ``classes``: the class of each lineage detected or started (counts are kept
+        per class; without it, one count for all).
         """
         sources = dict(self.sources)
         clock = sources.get(source)
@@ -220,21 +267,33 @@ class ObservedRates:
         else:
             sources[source] = SourceClock(clock.last_time, clock.interval, position)
         streams = dict(self.streams)
-        detectors = {d for (s, d) in streams if s == source} | set(detected) | set(born)
-        for detector in detectors:
-            key = (source, detector)
+
+        def class_of(lineage: int) -> str:
+            return "" if classes is None else classes.get(lineage, "")
+
+        keys = {k for k in streams if k[0] == source}
+        for detector in set(detected) | set(born):
+            for lineage in (*detected.get(detector, ()), *born.get(detector, ())):
+                keys.add((source, detector, class_of(lineage)))
+        for key in keys:
+            detector, cls = key[1], key[2]
             old = streams.get(key, StreamCounts())
-            now = frozenset(detected.get(detector, ()))
+            # a hit is any detection of the object by the stream, whatever class it now has
+            every = frozenset(detected.get(detector, ()))
+            now = frozenset(lineage for lineage in every if class_of(lineage) == cls)
+            started = frozenset(
+                lineage for lineage in born.get(detector, ()) if class_of(lineage) == cls
+            )
             expected = old.detected & alive
             streams[key] = StreamCounts(
-                DISCOUNT * old.hits + len(expected & now),
+                DISCOUNT * old.hits + len(expected & every),
                 DISCOUNT * old.expected + len(expected),
-                now | frozenset(born.get(detector, ())),
+                now | started,
             )
         seen = {lineage: streams_ for lineage, streams_ in self.seen.items() if lineage in alive}
         for detector in set(detected) | set(born):
-            key = (source, detector)
+            stream: StreamKey = (source, detector)
             for lineage in (*detected.get(detector, ()), *born.get(detector, ())):
                 if lineage in alive:
-                    seen[lineage] = {**seen.get(lineage, {}), key: time}
+                    seen[lineage] = {**seen.get(lineage, {}), stream: time}
         return ObservedRates(sources, streams, seen)

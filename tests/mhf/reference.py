@@ -26,7 +26,8 @@ Model ``mht`` (existence per object, class distribution per object): no per-pare
 from eq. 4 as above, spread over the disc of a relation), times ``label_error_rate``
 when a labelled detection meets a hypothesis in which an object holds that label; it
 starts an object with existence ``b / (b + c)``; existing ``o``: ``r_o * f_existing *
-L_class * N(z; x-, P- + R)`` (times ``label_error_rate`` for another label; for the
+L_class * N(z; x-, P- + R)`` (times ``label_error_rate`` for another label, or for
+no label while another object of the hypothesis holds the detection's; for the
 object holding the detection's label within ``label_gate``, N is 0.9 N(S) + 0.1 N(S +
 (label_gate / 3)^2 I)). Between scans every object's existence decays and every
 hypothesis is weighted by its objects' missed-detection probabilities q (rates
@@ -339,6 +340,12 @@ class ReferenceMHF:
                         )
                         w = o.r * self.f_existing(o.cls) * l_class * dens
                         if z.label is not None and o.label not in (None, z.label):
+                            w *= self.k.world.label_error_rate
+                        elif (
+                            z.label is not None
+                            and o.label is None
+                            and any(other.label == z.label for other in objs)
+                        ):  # an unlabelled object takes the label from its holder
                             w *= self.k.world.label_error_rate
                         post = {
                             c: p_c * self.confusion(z.cls, c) / l_class
