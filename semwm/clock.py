@@ -19,6 +19,7 @@ with ``t2 = t3``) and smooths it with a mean filter. A plain mean lets one delay
 exchange (a wireless retry: 0.5 s one way, 20 ms the other) pull the estimate by a
 quarter of a second. We keep the paper's mean but over the exchanges that bound the
 error best: of the last ``window`` exchanges, the ``best`` with the smallest delays
+(until the window is full, the smaller-delay half of those kept)
 (NTP's clock filter keeps the one smallest-delay sample of its last eight; averaging
 a few of the smallest keeps the paper's smoothing). A sliding window follows a
 drifting clock.
@@ -91,7 +92,8 @@ class ClockEstimate:
     window
         How many of the latest exchanges are kept (a drifting clock is followed).
     best
-        How many of the kept exchanges, those with the smallest delays, are averaged.
+        How many of the kept exchanges, those with the smallest delays, are averaged
+        at most; until the window is full, the smaller-delay half of those kept.
     exchanges
         The kept exchanges, oldest first.
     count
@@ -116,7 +118,11 @@ class ClockEstimate:
         return ClockEstimate(self.window, self.best, kept, self.count + 1)
 
     def _selected(self) -> list[Exchange]:
-        return sorted(self.exchanges, key=lambda e: e.delay)[: self.best]
+        # until the window is full, the smaller-delay half of what is kept (at most
+        # ``best``): with only a few exchanges one delayed exchange must not count
+        kept = len(self.exchanges)
+        count = self.best if kept >= self.window else min(self.best, max(1, (kept + 1) // 2))
+        return sorted(self.exchanges, key=lambda e: e.delay)[:count]
 
     @property
     def synced(self) -> bool:

@@ -130,3 +130,13 @@ def test_a_synced_detection_carries_the_offsets_uncertainty_as_time_std() -> Non
     assert placed[0]["time_std"] == pytest.approx(std)
     assert placed[1]["time_std"] == pytest.approx(math.hypot(0.03, std))
     assert "time_std" not in placed[2]  # unsynced: as sent
+
+
+def test_a_delayed_exchange_among_a_few_does_not_count() -> None:
+    # five exchanges, true offset 0: asymmetric delays, one delayed 0.4 s one way
+    # (paper 003's mean of all five would be 39 ms off)
+    delays = [(0.02, 0.06), (0.15, 0.03), (0.4, 0.02), (0.05, 0.05), (0.03, 0.1)]
+    estimate = ClockEstimate()
+    for k, (out, back) in enumerate(delays):
+        estimate = estimate.add(exchange(float(k), 0.0, out, back))
+    assert estimate.offset is not None and abs(estimate.offset) < 0.02
