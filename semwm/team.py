@@ -23,6 +23,13 @@ estimate holds the information sent before. What a report carries
   sent velocity; an object whose information did not grow (``I`` not positive
   definite) is not sent, the first report of an object is sent whole.
 
+When a report is sent (:meth:`LocalModel.report`): every report period, the
+objects updated since they were last sent; between periods, at once, the objects
+never sent and, with a ``drift_gate`` probability ``p`` (send-on-delta,
+event-triggered estimation), the objects whose last sent estimate, predicted to
+now as the global model predicts it, has drifted out of the local estimate's ``p``
+gate (:func:`drifted`).
+
 ``benchmarks/bench_team.py`` measures them (docs/team.md has the figures); the
 local id of each reported object travels with the report as a hint
 (:attr:`Report.local_ids`) but the global MHF does not use it for association.
@@ -38,6 +45,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
+from scipy.special import chdtri
 
 from semwm.knowledge.model import DetectorSpec, Knowledge
 from semwm.knowledge.resolve import resolve
@@ -142,17 +150,33 @@ class LocalModel:
         self.model.reset()
         self._sent = {}
 
-    def report(self, time: float | None = None, *, new_only: bool = False) -> Report | None:
+    def report(
+        self,
+        time: float | None = None,
+        *,
+        new_only: bool = False,
+        drift_gate: float | None = None,
+    ) -> Report | None:
         """The report at ``time`` (local clock; default the latest local time), or
         ``None`` when there is nothing to send. Remembers what it sent.
 
         ``new_only``: only objects never reported (a robot sends a new object at once
         rather than at its next report: the global model would otherwise learn of it
-        a report period late)."""
+        a report period late) and, with ``drift_gate``, objects updated since they
+        were sent whose sent estimate has drifted out of the local estimate's
+        ``drift_gate`` gate (:func:`drifted`): the global model's view of them is
+        wrong beyond the local uncertainty, so they are sent at once too."""
+        if drift_gate is not None and not 0.0 < drift_gate < 1.0:
+            raise ValueError(f"drift_gate must be a probability in (0, 1); got {drift_gate}")
         state = self.model.world(time=time)
         if state.time is None:
             return None
         at = state.time
+        gate = (
+            float(chdtri(self.model.knowledge.world.dimension, 1.0 - drift_gate))
+            if drift_gate is not None
+            else None
+        )
         detections: list[dict[str, object]] = []
         ids: list[int] = []
         alive = set()
@@ -160,7 +184,10 @@ class LocalModel:
             alive.add(obj.id)
             sent = self._sent.get(obj.id)
             if new_only and sent is not None:
-                continue
+                if gate is None or obj.last_seen <= sent.last_seen:
+                    continue
+                if not drifted(obj, sent, at, gate):
+                    continue
             item = self._item(obj, sent, at)
             if item is None:
                 continue
@@ -203,6 +230,27 @@ class LocalModel:
         if obj.label is not None:
             item["label"] = obj.label
         return item
+
+
+def drifted(obj: WorldObject, sent: _Sent, at: float, gate: float) -> bool:
+    r"""Whether the estimate ``sent`` of ``obj``, predicted to ``at`` as the global
+    model sees it, is outside the local estimate's gate (send-on-delta).
+
+    .. math::
+
+        \hat x_s(t) = x_s + v_s (t - t_s), \qquad
+        (x - \hat x_s(t))^\top P^{-1} (x - \hat x_s(t)) > \gamma
+
+    with ``(x, P)`` the local position estimate at ``t`` = ``at``, ``x_s, v_s`` the
+    position and velocity sent at ``t_s`` (``v_s = 0`` for classes without velocity:
+    their motion model keeps the position) and ``γ`` = ``gate``, the chi-square
+    quantile of a probability (:meth:`LocalModel.report`'s ``drift_gate``)."""
+    predicted = sent.position
+    if sent.velocity is not None:
+        predicted = predicted + sent.velocity * (at - sent.time)
+    delta = np.asarray(obj.position) - predicted
+    P = np.asarray(obj.covariance)
+    return float(delta @ np.linalg.solve(P, delta)) > gate
 
 
 def _new_information(

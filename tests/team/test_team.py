@@ -149,3 +149,33 @@ def test_simulate_levels_writes_the_team_metrics(tmp_path) -> None:  # type: ign
     team = json.loads((out / "metrics.json").read_text())["team"]
     assert team["levels"] == 2 and team["between_levels"]["messages"] > 0
     assert set(team["cpu_s"]) == {"local", "global"}
+
+
+def test_drift_gate_resends_an_object_whose_sent_estimate_went_wrong() -> None:
+    # Send-on-delta: between reports an object is sent again once its last sent
+    # estimate, moved on by the sent velocity, is outside the local estimate's gate.
+    # A ball rolling straight on keeps to its sent estimate; after a turn it does not.
+    robocup = load_knowledge(shipped_knowledge_path("robocup.yaml"))
+    local = LocalModel("r1", robocup)
+
+    def roll(t: float, x: float, y: float) -> None:
+        local.ingest([{"time": t, "class": "Ball", "position": [x, y], "source": "r1"}])
+
+    for i in range(10):
+        roll(i / 30, 2.0 * i / 30, 0.0)
+    assert local.report() is not None  # the period's report
+    straight = []
+    for i in range(10, 20):
+        roll(i / 30, 2.0 * i / 30, 0.0)
+        straight.append(local.report(new_only=True, drift_gate=0.95))
+    assert straight == [None] * 10
+    assert local.report() is not None  # sent at 19/30 s
+    turned = []
+    for i in range(20, 30):
+        roll(i / 30, 2.0 * 19 / 30, 2.0 * (i - 19) / 30)
+        turned.append(local.report(new_only=True, drift_gate=0.95))
+    sent = [r for r in turned if r is not None]
+    assert sent and all(len(r.detections) == 1 for r in sent)
+    assert sent[0].detections[0]["class"] == "Ball"
+    with pytest.raises(ValueError, match="drift_gate"):
+        local.report(new_only=True, drift_gate=5.99)
