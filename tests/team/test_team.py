@@ -151,31 +151,50 @@ def test_simulate_levels_writes_the_team_metrics(tmp_path) -> None:  # type: ign
     assert set(team["cpu_s"]) == {"local", "global"}
 
 
-def test_drift_gate_resends_an_object_whose_sent_estimate_went_wrong() -> None:
-    # Send-on-delta: between reports an object is sent again once its last sent
-    # estimate, moved on by the sent velocity, is outside the local estimate's gate.
-    # A ball rolling straight on keeps to its sent estimate; after a turn it does not.
+def test_drift_gate_reports_when_the_global_view_of_an_object_went_wrong() -> None:
+    # Send-on-delta: between periods a robot reports once the global side's view of
+    # an object (the class filter fed what was sent, predicted to now) is outside
+    # the local estimate's gate. A ball rolling straight on, reported every 0.1 s,
+    # keeps to that view once a few reports gave it the velocity; bounced back, the
+    # view is wrong and the robot reports before its next period.
     robocup = load_knowledge(shipped_knowledge_path("robocup.yaml"))
     local = LocalModel("r1", robocup)
 
-    def roll(t: float, x: float, y: float) -> None:
-        local.ingest([{"time": t, "class": "Ball", "position": [x, y], "source": "r1"}])
+    def scan(i: int, x: float, y: float) -> str:
+        local.ingest([{"time": i / 30, "class": "Ball", "position": [x, y], "source": "r1"}])
+        if i % 3 == 0:
+            local.report()
+            return "P"
+        if not local.due(drift_gate=0.95):
+            return "."
+        assert local.report() is not None
+        return "D"
 
-    for i in range(10):
-        roll(i / 30, 2.0 * i / 30, 0.0)
-    assert local.report() is not None  # the period's report
-    straight = []
-    for i in range(10, 20):
-        roll(i / 30, 2.0 * i / 30, 0.0)
-        straight.append(local.report(new_only=True, drift_gate=0.95))
-    assert straight == [None] * 10
-    assert local.report() is not None  # sent at 19/30 s
-    turned = []
-    for i in range(20, 30):
-        roll(i / 30, 2.0 * 19 / 30, 2.0 * (i - 19) / 30)
-        turned.append(local.report(new_only=True, drift_gate=0.95))
-    sent = [r for r in turned if r is not None]
-    assert sent and all(len(r.detections) == 1 for r in sent)
-    assert sent[0].detections[0]["class"] == "Ball"
+    straight = "".join(scan(i, 2.0 * i / 30, 0.0) for i in range(30))
+    assert "D" not in straight[9:]  # the view knows the velocity by then
+    turned = [scan(i, 2.0 * (58 - i) / 30, 0.0) for i in range(30, 45)]  # bounced back
+    assert "D" in turned
+    assert not LocalModel("r2", robocup).due(drift_gate=0.95)  # nothing seen
     with pytest.raises(ValueError, match="drift_gate"):
-        local.report(new_only=True, drift_gate=5.99)
+        local.due(drift_gate=5.99)
+
+
+def test_a_robot_with_a_new_object_is_due_and_sends_its_whole_report(knowledge) -> None:  # type: ignore[no-untyped-def]
+    # A report read as a scan of the robot: one holding only the new object would
+    # count as missing the robot's other objects. Due, the robot sends all of them
+    # that were updated since they were sent.
+    local = LocalModel("r1", knowledge, Strategy.UPDATED)
+    for t in (0.0, 0.1, 0.2):
+        local.ingest([cup(t)])
+    assert local.due()
+    assert local.report() is not None and not local.due()
+    table = {"class": "Table", "position": [3.0, 2.0], "source": "r1"}
+    for t in (0.3, 0.4, 0.5):
+        local.ingest([cup(t), {**table, "time": t}])
+    assert local.due()
+    report = local.report()
+    assert report is not None and sorted(d["class"] for d in report.detections) == [
+        "Cup",
+        "Table",
+    ]
+    assert not local.due()
