@@ -30,12 +30,11 @@ view of an object has drifted out of the local estimate's ``p`` gate
 (:func:`drifted`). The report is then the whole report (with ``updated``, every
 object updated since it was sent), not the drifted object alone: the global model
 reads a report as a scan of the robot, and one that left out objects the robot
-sees would count as missing them. That view is a replica:
-the class's filter fed what this robot sent of the object, as the global model
-feeds it (a new object at the first position sent, then each report as a position
-measurement with its covariance), predicted to now. The global model also fuses
-other robots' reports, so its view is no worse than the replica's and the rule
-errs towards sending.
+sees would count as missing them. That view is a replica: the class's filter fed
+what this robot sent of the object, as the global model feeds it (a new object at
+the first position sent, then each report as a position measurement with its
+covariance), predicted to now. The global model also fuses other robots' reports,
+so its view is no worse than the replica's and the rule errs towards sending.
 
 ``benchmarks/bench_team.py`` measures them (docs/team.md has the figures); the
 local id of each reported object travels with the report as a hint
@@ -303,7 +302,7 @@ def drifted(obj: WorldObject, expected: np.ndarray, gate: float) -> bool:
 
     with ``(x, P)`` the local position estimate, ``\hat x_g`` = ``expected`` (the
     replica of what was sent, predicted to now: module docstring) and ``γ`` =
-    ``gate``, the chi-square quantile of a probability (:meth:`LocalModel.report`'s
+    ``gate``, the chi-square quantile of a probability (:meth:`LocalModel.due`'s
     ``drift_gate``)."""
     delta = np.asarray(obj.position) - expected
     P = np.asarray(obj.covariance)
