@@ -23,6 +23,19 @@ estimate holds the information sent before. What a report carries
   sent velocity; an object whose information did not grow (``I`` not positive
   definite) is not sent, the first report of an object is sent whole.
 
+When a report is sent: every report period, and between periods at once when
+:meth:`LocalModel.due`: an object was never sent or, with a ``drift_gate``
+probability ``p`` (send-on-delta, event-triggered estimation), the global side's
+view of an object has drifted out of the local estimate's ``p`` gate
+(:func:`drifted`). The report is then the whole report (with ``updated``, every
+object updated since it was sent), not the drifted object alone: the global model
+reads a report as a scan of the robot, and one that left out objects the robot
+sees would count as missing them. That view is a replica: the class's filter fed
+what this robot sent of the object, as the global model feeds it (a new object at
+the first position sent, then each report as a position measurement with its
+covariance), predicted to now. The global model also fuses other robots' reports,
+so its view is no worse than the replica's and the rule errs towards sending.
+
 ``benchmarks/bench_team.py`` measures them (docs/team.md has the figures); the
 local id of each reported object travels with the report as a hint
 (:attr:`Report.local_ids`) but the global MHF does not use it for association.
@@ -38,7 +51,9 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
+from scipy.special import chdtri
 
+from semwm.filters.factory import FilterFactory
 from semwm.knowledge.model import DetectorSpec, Knowledge
 from semwm.knowledge.resolve import resolve
 from semwm.validation import DetectionInput
@@ -92,12 +107,25 @@ class Report:
 
 
 @dataclass(frozen=True)
+class _Replica:
+    """The global side's view of one object from one robot's reports: the class
+    filter's state ``x (1, M, n)``, ``P (1, M, n, n)``, ``mu (1, M)`` at ``time``."""
+
+    cls: str
+    time: float
+    x: np.ndarray
+    P: np.ndarray
+    mu: np.ndarray
+
+
+@dataclass(frozen=True)
 class _Sent:
     time: float
     position: np.ndarray
     velocity: np.ndarray | None
     covariance: np.ndarray
     last_seen: float
+    replica: _Replica | None = None
 
 
 class LocalModel:
@@ -130,6 +158,7 @@ class LocalModel:
         self.strategy = Strategy(strategy)
         self.detector = detector
         self.model = WorldModel(knowledge, reorder_window=reorder_window)
+        self._filters = FilterFactory(knowledge)
         self._sent: dict[int, _Sent] = {}
 
     def ingest(self, detections: DetectionInput | Iterable[DetectionInput]) -> IngestResult:
@@ -142,13 +171,44 @@ class LocalModel:
         self.model.reset()
         self._sent = {}
 
+    def due(self, time: float | None = None, *, drift_gate: float | None = None) -> bool:
+        """Whether the robot should report at ``time`` rather than wait for its next
+        periodic report: an object was never sent (the global model would learn of
+        it a report period late), or, with ``drift_gate`` (a probability), an object
+        updated since it was sent has drifted: the global side's view of it is
+        outside the local estimate's ``drift_gate`` gate (:func:`drifted`;
+        send-on-delta). The report then sent is the whole :meth:`report`."""
+        if drift_gate is not None and not 0.0 < drift_gate < 1.0:
+            raise ValueError(f"drift_gate must be a probability in (0, 1); got {drift_gate}")
+        state = self.model.world(time=time)
+        if state.time is None:
+            return False
+        at = state.time
+        gate = (
+            float(chdtri(self.model.knowledge.world.dimension, 1.0 - drift_gate))
+            if drift_gate is not None
+            else None
+        )
+        for obj in state.objects:
+            sent = self._sent.get(obj.id)
+            if sent is None:
+                return True
+            if (
+                gate is not None
+                and obj.last_seen > sent.last_seen  # new information to send
+                and drifted(obj, self._global_view(sent, at), gate)
+            ):
+                return True
+        return False
+
     def report(self, time: float | None = None, *, new_only: bool = False) -> Report | None:
         """The report at ``time`` (local clock; default the latest local time), or
         ``None`` when there is nothing to send. Remembers what it sent.
 
-        ``new_only``: only objects never reported (a robot sends a new object at once
-        rather than at its next report: the global model would otherwise learn of it
-        a report period late)."""
+        ``new_only``: only objects never reported. A report with some of the robot's
+        objects left out reads, to the global model, as a scan that missed them (their
+        existence drops): a robot that must send between reports (:meth:`due`) sends
+        the whole report."""
         state = self.model.world(time=time)
         if state.time is None:
             return None
@@ -172,11 +232,40 @@ class LocalModel:
                 np.asarray(obj.velocity) if obj.velocity is not None else None,
                 np.asarray(obj.covariance),
                 obj.last_seen,
+                self._replica(obj.cls, sent.replica if sent is not None else None, item, at),
             )
         self._sent = {k: v for k, v in self._sent.items() if k in alive}
         if not detections:
             return None
         return Report(self.robot, at, tuple(detections), tuple(ids))
+
+    def _replica(
+        self, cls: str, replica: _Replica | None, item: dict[str, object], at: float
+    ) -> _Replica:
+        """``replica`` after the global model takes ``item``: a new object at its
+        position (:meth:`ClassFilter.initial_states`, as the global MHF starts one), else
+        predicted to ``at`` and updated with it as a position measurement."""
+        z = np.asarray(item["position"], dtype=float)[None, :]
+        f = self._filters.filter_for(cls)
+        if replica is None or self._filters.filter_for(replica.cls).state_size != f.state_size:
+            x, P, mu = f.initial_states(z)
+            return _Replica(cls, at, x, P, mu)
+        f = self._filters.filter_for(replica.cls)
+        x, P, mu = f.predict(replica.x, replica.P, replica.mu, np.array([at - replica.time]))
+        R = np.asarray(item["covariance"], dtype=float)[None, :, :]
+        x, P, mu, _ = f.update(x, P, mu, z, R)
+        return _Replica(replica.cls, at, x, P, mu)
+
+    def _global_view(self, sent: _Sent, at: float) -> np.ndarray:
+        """The position the global side expects at ``at`` from what was sent: the
+        replica predicted (its mean, the modes combined)."""
+        replica = sent.replica
+        if replica is None:
+            return sent.position
+        f = self._filters.filter_for(replica.cls)
+        x, P, mu = f.predict(replica.x, replica.P, replica.mu, np.array([at - replica.time]))
+        mean, _ = f.combine(x, P, mu)
+        return np.asarray(mean[0, : f.dim])
 
     def _item(self, obj: WorldObject, sent: _Sent | None, at: float) -> dict[str, object] | None:
         strategy = self.strategy
@@ -203,6 +292,21 @@ class LocalModel:
         if obj.label is not None:
             item["label"] = obj.label
         return item
+
+
+def drifted(obj: WorldObject, expected: np.ndarray, gate: float) -> bool:
+    r"""Whether the position the global side expects of ``obj`` is outside the local
+    estimate's gate (send-on-delta):
+
+    .. math:: (x - \hat x_g)^\top P^{-1} (x - \hat x_g) > \gamma
+
+    with ``(x, P)`` the local position estimate, ``\hat x_g`` = ``expected`` (the
+    replica of what was sent, predicted to now: module docstring) and ``γ`` =
+    ``gate``, the chi-square quantile of a probability (:meth:`LocalModel.due`'s
+    ``drift_gate``)."""
+    delta = np.asarray(obj.position) - expected
+    P = np.asarray(obj.covariance)
+    return float(delta @ np.linalg.solve(P, delta)) > gate
 
 
 def _new_information(

@@ -68,6 +68,15 @@ def add_team_options(parser: argparse.ArgumentParser) -> None:
         choices=("all", "updated", "ci", "information"),
         help="what local models send (with --levels 2)",
     )
+    team.add_argument(
+        "--drift-gate",
+        type=float,
+        default=0.95,
+        metavar="P",
+        help="with --levels 2: a robot also reports between periods when the global "
+        "view of an object leaves the P gate of its local estimate (send-on-delta); "
+        "0: only for new objects",
+    )
 
 
 def simulate_team(
@@ -92,6 +101,7 @@ def simulate_team(
         levels=args.levels,
         network=network,
         strategy=args.strategy,
+        drift_gate=args.drift_gate if args.drift_gate > 0 else None,
         seed=args.seed,
     )
     write_run(team.result, out, ablations=ablations)

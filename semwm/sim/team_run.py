@@ -28,13 +28,15 @@
 
 ``levels=1``: every detection is a message to one model. ``levels=2``: each robot
 feeds its local model directly (its own clock) and every ``report_period`` sends a
-report (:mod:`semwm.team`) to the global model (and at once, between reports, the
-objects its local model has not reported yet), from a start drawn per robot in
-the first period (robots do not report in step with each other or with the
-evaluation times: in step, every report would be sent exactly at an evaluation
-time and never be in the world evaluated then). The world evaluated at every truth
-time is the receiver's (flat or global) model. CPU time per level is
-:func:`time.process_time` around each level's work.
+report (:mod:`semwm.team`) to the global model, and reports at once, between
+periods, when its local model has an object it has not reported yet or, with
+``drift_gate``, one whose view on the global side has drifted out of the local
+estimate's gate (send-on-delta, :meth:`semwm.team.LocalModel.due`), from a start
+drawn per robot in the first period (robots do not report in step
+with each other or with the evaluation times: in step, every report would be sent
+exactly at an evaluation time and never be in the world evaluated then). The world
+evaluated at every truth time is the receiver's (flat or global) model. CPU time
+per level is :func:`time.process_time` around each level's work.
 """
 
 from __future__ import annotations
@@ -149,10 +151,16 @@ def run_team(
     network: Network | None = None,
     strategy: Strategy | str = Strategy.UPDATED,
     report_period: float = 0.1,
+    drift_gate: float | None = 0.95,
     seed: int = 0,
     gospa_c: float | None = None,
 ) -> TeamRun:
-    """Play ``scenario`` through a flat (``levels=1``) or two-level team."""
+    """Play ``scenario`` through a flat (``levels=1``) or two-level team.
+
+    ``drift_gate`` (two levels): between periods a robot also reports when the
+    global side's view of one of its objects is outside this probability's gate of
+    the local estimate (:meth:`semwm.team.LocalModel.due`); ``None``: only when it
+    has a new object."""
     if levels not in (1, 2):
         raise ValueError(f"levels must be 1 or 2; got {levels}")
     net = network or Network()
@@ -196,8 +204,8 @@ def run_team(
         if t >= next_report[source] - 1e-9:
             next_report[source] = t + report_period
             report = local.report()
-        else:
-            report = local.report(new_only=True)
+        elif local.due(drift_gate=drift_gate):
+            report = local.report()  # the whole report, between periods
         cpu_local += clock.process_time() - start
         if report is not None:
             n_messages += 1

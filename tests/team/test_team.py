@@ -149,3 +149,52 @@ def test_simulate_levels_writes_the_team_metrics(tmp_path) -> None:  # type: ign
     team = json.loads((out / "metrics.json").read_text())["team"]
     assert team["levels"] == 2 and team["between_levels"]["messages"] > 0
     assert set(team["cpu_s"]) == {"local", "global"}
+
+
+def test_drift_gate_reports_when_the_global_view_of_an_object_went_wrong() -> None:
+    # Send-on-delta: between periods a robot reports once the global side's view of
+    # an object (the class filter fed what was sent, predicted to now) is outside
+    # the local estimate's gate. A ball rolling straight on, reported every 0.1 s,
+    # keeps to that view once a few reports gave it the velocity; bounced back, the
+    # view is wrong and the robot reports before its next period.
+    robocup = load_knowledge(shipped_knowledge_path("robocup.yaml"))
+    local = LocalModel("r1", robocup)
+
+    def scan(i: int, x: float, y: float) -> str:
+        local.ingest([{"time": i / 30, "class": "Ball", "position": [x, y], "source": "r1"}])
+        if i % 3 == 0:
+            local.report()
+            return "P"
+        if not local.due(drift_gate=0.95):
+            return "."
+        assert local.report() is not None
+        return "D"
+
+    straight = "".join(scan(i, 2.0 * i / 30, 0.0) for i in range(30))
+    assert "D" not in straight[9:]  # the view knows the velocity by then
+    turned = [scan(i, 2.0 * (58 - i) / 30, 0.0) for i in range(30, 45)]  # bounced back
+    assert "D" in turned
+    assert not LocalModel("r2", robocup).due(drift_gate=0.95)  # nothing seen
+    with pytest.raises(ValueError, match="drift_gate"):
+        local.due(drift_gate=5.99)
+
+
+def test_a_robot_with_a_new_object_is_due_and_sends_its_whole_report(knowledge) -> None:  # type: ignore[no-untyped-def]
+    # A report read as a scan of the robot: one holding only the new object would
+    # count as missing the robot's other objects. Due, the robot sends all of them
+    # that were updated since they were sent.
+    local = LocalModel("r1", knowledge, Strategy.UPDATED)
+    for t in (0.0, 0.1, 0.2):
+        local.ingest([cup(t)])
+    assert local.due()
+    assert local.report() is not None and not local.due()
+    table = {"class": "Table", "position": [3.0, 2.0], "source": "r1"}
+    for t in (0.3, 0.4, 0.5):
+        local.ingest([cup(t), {**table, "time": t}])
+    assert local.due()
+    report = local.report()
+    assert report is not None and sorted(d["class"] for d in report.detections) == [
+        "Cup",
+        "Table",
+    ]
+    assert not local.due()
