@@ -251,11 +251,16 @@ class WorldService:
 
     @classmethod
     def from_file(
-        cls, path: Path, reorder_window: float = 0.5, write_back: bool = False, **options: Any
+        cls,
+        path: Path,
+        reorder_window: float = 0.5,
+        write_back: bool = False,
+        hold: float = 0.0,
+        **options: Any,
     ) -> WorldService:
         """Load ``path`` and build the world model (raises :class:`KnowledgeError`)."""
         return cls(
-            WorldModel(load_knowledge(path), reorder_window=reorder_window),
+            WorldModel(load_knowledge(path), reorder_window=reorder_window, hold=hold),
             path,
             write_back,
             **options,
