@@ -100,14 +100,13 @@ class _Held:
 
 @dataclass(frozen=True)
 class _Tentative:
-    """The held scans processed on a copy, for queries: ``state`` and ``book`` after
-    ``held`` (in time order) starting from the committed ``base`` and ``base_book``."""
+    """The held scans processed on a copy, for queries: from the committed ``base`` and
+    ``base_book``, each held scan (in time order) with the state and confidences after
+    it. When a held scan is released, its entry is committed as it is (no second run)."""
 
     base: MHFState
     base_book: ConfidenceBook
-    held: tuple[_Held, ...]
-    state: MHFState
-    book: ConfidenceBook
+    chain: tuple[tuple[_Held, MHFState, ConfidenceBook], ...]
 
 
 @dataclass(frozen=True)
@@ -125,6 +124,11 @@ class _Published:
 
 _Floor = tuple[ScanKey, str]
 """No scan at or before this key may be processed any more, and why."""
+
+
+def _same(a: Sequence[Measurement], b: Sequence[Measurement]) -> bool:
+    """The same detection objects in the same order."""
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b, strict=True))
 
 
 def _checked_hold(hold: float) -> float:
@@ -620,11 +624,7 @@ class WorldModel:
         for key in sorted(scans):
             before, before_book = state, book
             scan_view = views.get(key)
-            state = self._mhf.process_scan(state, scans[key], scan_view)
-            if self._mhf.mht:
-                book = advance(
-                    book, state, scans[key], scan_view, self._knowledge, self._mhf.factory
-                )
+            state, book = self._step(state, book, scans[key], scan_view)
             log.append(_LoggedScan(key, tuple(scans[key]), before, scan_view, before_book))
         assert state.time is not None
         horizon = state.time - self.reorder_window
@@ -671,23 +671,41 @@ class WorldModel:
 
     def _tentative_state(self) -> tuple[MHFState, ConfidenceBook]:
         """The held scans processed in time order on the committed state, not committed.
-        Cached: held scans added after the cached ones extend the cache."""
-        held = tuple(self._pending[k] for k in sorted(self._pending))
+        Cached: the cached scans that are still the first held ones are not run again."""
+        held = [self._pending[k] for k in sorted(self._pending)]
         cache = self._tentative
-        done = 0
-        state, book = self._state, self._book
-        if cache is not None and cache.base is state and cache.base_book is book:
-            n = len(cache.held)
-            if n <= len(held) and all(a is b for a, b in zip(cache.held, held, strict=False)):
-                done, state, book = n, cache.state, cache.book
-        for scan in held[done:]:
-            measurements = list(scan.measurements)
-            state = self._mhf.process_scan(state, measurements, scan.view)
-            if self._mhf.mht:
-                book = advance(
-                    book, state, measurements, scan.view, self._knowledge, self._mhf.factory
-                )
-        self._tentative = _Tentative(self._state, self._book, held, state, book)
+        chain: list[tuple[_Held, MHFState, ConfidenceBook]] = []
+        if cache is not None and cache.base is self._state and cache.base_book is self._book:
+            for entry, scan in zip(cache.chain, held, strict=False):
+                if entry[0] is not scan:
+                    break
+                chain.append(entry)
+        state, book = (chain[-1][1], chain[-1][2]) if chain else (self._state, self._book)
+        for scan in held[len(chain) :]:
+            state, book = self._step(state, book, list(scan.measurements), scan.view)
+            chain.append((scan, state, book))
+        self._tentative = _Tentative(self._state, self._book, tuple(chain))
+        return state, book
+
+    def _step(
+        self,
+        state: MHFState,
+        book: ConfidenceBook,
+        measurements: list[Measurement],
+        view: SensorView | None,
+    ) -> tuple[MHFState, ConfidenceBook]:
+        """One scan processed: the MHF (paper 002) and the confidences (paper 004). The
+        first scan of the query cache, from the same state, is taken from it: the same
+        values, computed once."""
+        cache = self._tentative
+        if cache is not None and cache.chain and cache.base is state and cache.base_book is book:
+            held, after, after_book = cache.chain[0]
+            if held.view is view and _same(held.measurements, measurements):
+                self._tentative = _Tentative(after, after_book, cache.chain[1:])
+                return after, after_book
+        state = self._mhf.process_scan(state, measurements, view)
+        if self._mhf.mht:
+            book = advance(book, state, measurements, view, self._knowledge, self._mhf.factory)
         return state, book
 
     # ------------------------------------------------------------------ ids

@@ -89,9 +89,15 @@ def test_a_stream_shuffled_within_the_hold_gives_the_in_order_world_without_repl
     for _, batch in stream:
         in_order.ingest(batch)
     held = WorldModel(sim1, reorder_window=0.3, hold=hold)
+    asked = WorldModel(sim1, reorder_window=0.3, hold=hold)  # queried after every batch
     for batch in arrivals(stream, jitter=0.02):  # out of order by up to 40 ms
         held.ingest(batch)
-    assert held.replayed_scans == 0
+        asked.ingest(batch)
+        asked.world()
+    assert held.replayed_scans == 0 == asked.replayed_scans
+    assert world_digest(asked.world()) == world_digest(held.world())
+    assert held_scans(asked) == held_scans(held)
+    assert asked._state.time == held._state.time
     assert held.pending_scans > 0
     assert world_digest(held.world()) == world_digest(in_order.world())
     assert [h.probability for h in held.hypotheses(5)] == [
