@@ -98,15 +98,22 @@ class _Held:
     view: SensorView | None = None
 
 
+_Tables = tuple[dict[int, int], int, dict[int, "_Published"], dict[int, "_Published"]]
+"""The id tables: lineage -> id, the next id, the published and the lost objects."""
+_Link = tuple[_Held, MHFState, ConfidenceBook, _Tables]
+
+
 @dataclass(frozen=True)
 class _Tentative:
-    """The held scans processed on a copy, for queries: from the committed ``base`` and
-    ``base_book``, each held scan (in time order) with the state and confidences after
-    it. When a held scan is released, its entry is committed as it is (no second run)."""
+    """The held scans processed on a copy, for queries: from the committed ``base``,
+    ``base_book`` and ``base_tables``, each held scan (in time order) with the state,
+    confidences and id tables after it. When a held scan is released, its link is
+    committed as it is (no second run)."""
 
     base: MHFState
     base_book: ConfidenceBook
-    chain: tuple[tuple[_Held, MHFState, ConfidenceBook], ...]
+    base_tables: _Tables
+    chain: tuple[_Link, ...]
 
 
 @dataclass(frozen=True)
@@ -124,6 +131,11 @@ class _Published:
 
 _Floor = tuple[ScanKey, str]
 """No scan at or before this key may be processed any more, and why."""
+
+
+def _same_tables(a: _Tables, b: _Tables) -> bool:
+    """The same id tables (the same dicts, not equal ones)."""
+    return a[0] is b[0] and a[1] == b[1] and a[2] is b[2] and a[3] is b[3]
 
 
 def _same(a: Sequence[Measurement], b: Sequence[Measurement]) -> bool:
@@ -454,8 +466,22 @@ class WorldModel:
                 break
             held = self._pending.pop(key)
             views = {key: held.view} if held.view is not None else {}
+            cache = self._tentative
+            cached = (
+                self._fits(cache)
+                and cache is not None
+                and bool(cache.chain)
+                and cache.chain[0][0] is held
+            )
             self._commit(*self._process_scans({key: list(held.measurements)}, views))
-            self._publish()
+            if cached and self._tentative is not None and self._tentative.base is self._state:
+                # the ids a query gave after this scan: what _publish gives here
+                ids, next_id, published, lost = self._tentative.base_tables
+                self._ids, self._next_id = dict(ids), next_id
+                self._published, self._lost = published, dict(lost)
+                self._tentative = replace(self._tentative, base_tables=self._tables())
+            else:
+                self._publish()
 
     def act(self, action: ActionReport | Mapping[str, Any]) -> list[int]:
         """Apply an action (paper 004 IV-B; :mod:`semwm.mhf.actions`): a kick splits every
@@ -642,14 +668,15 @@ class WorldModel:
     # ------------------------------------------------------------------ held scans
     @contextmanager
     def _including_pending(self) -> Iterator[None]:
-        """Within: the model as if the held scans had been processed now in one ingest
+        """Within: the model as if each held scan had been ingested now, in time order
         (state, confidences and ids), with none held; after: exactly as before.
 
         This is how queries include every accepted detection without committing the
         held scans (committing early would make a later scan within the hold a
-        replay, and what is accepted would depend on when someone asked). The copy
-        costs one :meth:`MultipleHypothesisFilter.process_scan` per held scan not yet
-        in the cache (:meth:`_tentative_state`) and one :meth:`_publish`.
+        replay, and what is accepted would depend on when someone asked). It costs
+        one :meth:`MultipleHypothesisFilter.process_scan` and one :meth:`_publish` per
+        held scan not yet in the cache (:meth:`_tentative_chain`); a released scan the
+        cache holds is committed from it, so a scan is processed once either way.
         """
         if not self._pending:
             yield
@@ -659,9 +686,9 @@ class WorldModel:
             self._published, self._lost, self._summaries,
         )  # fmt: skip
         try:
-            self._state, self._book = self._tentative_state()
-            self._pending, self._ids, self._lost = {}, dict(self._ids), dict(self._lost)
-            self._publish()
+            _, self._state, self._book, tables = self._tentative_chain()[-1]
+            self._pending = {}
+            self._ids, self._next_id, self._published, self._lost = tables
             yield
         finally:
             (
@@ -669,23 +696,44 @@ class WorldModel:
                 self._published, self._lost, self._summaries,
             ) = saved  # fmt: skip
 
-    def _tentative_state(self) -> tuple[MHFState, ConfidenceBook]:
-        """The held scans processed in time order on the committed state, not committed.
-        Cached: the cached scans that are still the first held ones are not run again."""
+    def _tables(self) -> _Tables:
+        return self._ids, self._next_id, self._published, self._lost
+
+    def _fits(self, cache: _Tentative | None) -> bool:
+        """Whether ``cache`` starts from the committed state, confidences and ids."""
+        return (
+            cache is not None
+            and cache.base is self._state
+            and cache.base_book is self._book
+            and _same_tables(cache.base_tables, self._tables())
+        )
+
+    def _tentative_chain(self) -> tuple[_Link, ...]:
+        """Each held scan (time order) with the state, confidences and id tables after
+        it, from the committed ones; not committed (the model's attributes are changed
+        and must be restored: :meth:`_including_pending`). Cached: the cached scans that
+        are still the first held ones are not run again."""
         held = [self._pending[k] for k in sorted(self._pending)]
         cache = self._tentative
-        chain: list[tuple[_Held, MHFState, ConfidenceBook]] = []
-        if cache is not None and cache.base is self._state and cache.base_book is self._book:
-            for entry, scan in zip(cache.chain, held, strict=False):
-                if entry[0] is not scan:
+        chain: list[_Link] = []
+        if self._fits(cache):
+            assert cache is not None
+            for link, scan in zip(cache.chain, held, strict=False):
+                if link[0] is not scan:
                     break
-                chain.append(entry)
-        state, book = (chain[-1][1], chain[-1][2]) if chain else (self._state, self._book)
+                chain.append(link)
+        base = self._state, self._book, self._tables()
+        state, book, tables = chain[-1][1:] if chain else base
         for scan in held[len(chain) :]:
             state, book = self._step(state, book, list(scan.measurements), scan.view)
-            chain.append((scan, state, book))
-        self._tentative = _Tentative(self._state, self._book, tuple(chain))
-        return state, book
+            ids, next_id, published, lost = tables  # tables in a link are never changed
+            self._state, self._ids, self._next_id = state, dict(ids), next_id
+            self._published, self._lost = published, dict(lost)
+            self._publish()
+            tables = self._tables()
+            chain.append((scan, state, book, tables))
+        self._tentative = _Tentative(base[0], base[1], base[2], tuple(chain))
+        return tuple(chain)
 
     def _step(
         self,
@@ -699,9 +747,9 @@ class WorldModel:
         values, computed once."""
         cache = self._tentative
         if cache is not None and cache.chain and cache.base is state and cache.base_book is book:
-            held, after, after_book = cache.chain[0]
+            held, after, after_book, tables = cache.chain[0]
             if held.view is view and _same(held.measurements, measurements):
-                self._tentative = _Tentative(after, after_book, cache.chain[1:])
+                self._tentative = _Tentative(after, after_book, tables, cache.chain[1:])
                 return after, after_book
         state = self._mhf.process_scan(state, measurements, view)
         if self._mhf.mht:
