@@ -11,6 +11,7 @@ import pytest
 
 from semwm import load_knowledge
 from semwm.detection import DetectionError, OutOfOrderError
+from semwm.knowledge.loader import knowledge_from_text
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.persistence import DurableWorld, model_digest
@@ -203,3 +204,40 @@ def test_hold_must_be_a_finite_number_not_below_0(sim1: Knowledge) -> None:
     for bad in (-0.1, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="hold"):
             WorldModel(sim1, hold=bad)
+
+
+KICKABLE = """
+world: {dimension: 2, region: [[-10, 10], [-10, 10]]}
+classes:
+- name: Ball
+  category: passive
+  detection_frequency: 10
+  filter: {type: kalman, model: {motion_model: first_order, system_noise: [[0.05, 0], [0, 0.05]]}}
+  measurement_noise: [[0.0025, 0], [0, 0.0025]]
+  initial_velocity_covariance: [[0.01, 0], [0, 0.01]]
+  velocity_decay: 0.3
+- name: Post
+  category: static
+  detection_frequency: 10
+  filter: {type: kalman, model: {motion_model: zeroth_order, system_noise: [[0.001, 0], [0, 0.001]]}}
+  measurement_noise: [[0.0025, 0], [0, 0.0025]]
+detectors: [{name: camera, clutter_frequency: 0.5}]
+"""  # tests/categories/test_kick.py's
+KICK = {"time": 1.0, "type": "kick", "source": "me", "near": [0.1, 0.0], "direction": [0, 3],
+        "speed": 2.0}  # fmt: skip
+
+
+def test_an_action_sees_and_then_processes_the_held_scans() -> None:
+    knowledge = knowledge_from_text(KICKABLE, "yaml")
+    worlds = []
+    for hold in (0.0, 0.5):
+        wm = WorldModel(knowledge, hold=hold)
+        for t in np.arange(0.0, 1.0 + 1e-9, 0.1):
+            wm.ingest([{"time": float(t), "class": "Ball", "position": [0.0, 0.0]},
+                       {"time": float(t), "class": "Post", "position": [3.0, 0.0]}])  # fmt: skip
+        assert wm.pending_scans == (5 if hold else 0)  # 0.6-1.0 held
+        moved = wm.act(KICK)  # found among the held scans' objects
+        assert wm.pending_scans == 0 and moved
+        wm.ingest({"time": 1.5, "class": "Ball", "position": [0.0, 1.2]})
+        worlds.append(world_digest(wm.world(2.0)))
+    assert worlds[0] == worlds[1]
