@@ -539,6 +539,8 @@ class WorldService:
                 "hypotheses_log10_joint": self._model.log10_joint_hypotheses,
                 "clusters": self._model.cluster_count,
                 "tracks": self._model.track_count,
+                "held_scans": self._model.pending_scans,
+                "replayed_scans": self._model.replayed_scans,
                 "knowledge_version": self.knowledge_version,
             }
 

@@ -92,6 +92,14 @@ def reader(url: str, until: threading.Event, out: dict[str, Any]) -> None:
     out["reader"] = latencies
 
 
+def _metric(text: str, name: str) -> float | None:
+    """A metric's value in Prometheus text (``None`` if absent)."""
+    for line in text.splitlines():
+        if line.startswith(name + " "):
+            return float(line.split()[1])
+    return None
+
+
 def percentiles(values: list[float]) -> dict[str, float]:
     ms = np.asarray(values) * 1e3
     return {
@@ -122,6 +130,7 @@ def run(seconds: float, hold: float = 0.0) -> dict[str, Any]:
             watcher.join()
             wall = time.monotonic() - start
             world = httpx.get(f"{url}/world", timeout=30).json()
+            metrics = httpx.get(f"{url}/metrics", timeout=30).text
         finally:
             process.terminate()
             process.wait(10)
@@ -149,6 +158,7 @@ def run(seconds: float, hold: float = 0.0) -> dict[str, Any]:
         "post_ms": post,
         "get_world_ms": percentiles(results["reader"]),
         "errors": sum(results[f"r{r}"]["errors"] for r in range(ROBOTS)),
+        "replayed_scans": _metric(metrics, "semwm_replayed_scans"),
         "objects_published": len(world["objects"]),
         "objects_seen": len(
             {(2 * r + k) % len(OBJECTS) for r in range(ROBOTS) for k in range(PER_BATCH)}

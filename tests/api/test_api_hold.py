@@ -26,6 +26,8 @@ def test_held_detections_are_answered_refused_alike_and_survive_a_restart(tmp_pa
         world = client.get("/world").json()
         assert world["time"] == 0.3 and len(world["objects"]) == 1  # all held, all answered
         assert client.get("/health").json()["time"] == 0.3
+        metrics = client.get("/metrics").text
+        assert "semwm_held_scans 4.0" in metrics and "semwm_replayed_scans 0.0" in metrics
         wrong = {**_cup(0.25), "class": "Nope"}
         bad = client.post("/detections", json={"detections": [_cup(0.25), wrong]})
         assert bad.status_code == 422  # validated at ingest, though it would be held
