@@ -75,6 +75,7 @@ def create_app(settings: Settings) -> FastAPI:
             app.state.world = WorldService.from_file(
                 settings.knowledge,
                 reorder_window=settings.reorder_window,
+                hold=settings.hold,
                 write_back=settings.write_back,
                 time_guard=TimeGuard(settings.max_ahead, settings.max_jump),
                 max_sources=settings.max_sources,

@@ -10,7 +10,8 @@ Metric names (all prefixed ``semwm_``): ``detections_accepted_total``,
 ``ingest_latency_seconds`` (the whole ``POST /detections`` request),
 ``ingest_apply_seconds`` (the world model's part, under the lock), ``objects``,
 ``stored_hypotheses``, ``joint_hypotheses_log10``, ``clusters``, ``tracks``,
-``knowledge_version``, ``world_time_seconds``, ``stream_subscribers``.
+``held_scans``, ``replayed_scans``, ``knowledge_version``, ``world_time_seconds``,
+``stream_subscribers``.
 """
 
 from __future__ import annotations
@@ -81,12 +82,15 @@ class WorldCollector(Collector):
              "the clusters')", stats["hypotheses_log10_joint"]),
             ("clusters", "Independent clusters of objects", stats["clusters"]),
             ("tracks", "Distinct object versions stored", stats["tracks"]),
+            ("held_scans", "Scans held by --hold, not yet processed", stats["held_scans"]),
+            ("replayed_scans", "Scans processed again because an older one came after them "
+             "(since start or reset; --hold avoids them)", stats["replayed_scans"]),
             ("knowledge_version", "Knowledge version: 1 at start, +1 per edit or reload",
              stats["knowledge_version"]),
             ("stream_subscribers", "Open GET /world/stream connections", self._subscribers()),
         ]  # fmt: skip
         if stats["time"] is not None:
-            gauges.append(("world_time_seconds", "Latest processed detection time", stats["time"]))
+            gauges.append(("world_time_seconds", "Latest accepted detection time", stats["time"]))
         for name, documentation, value in gauges:
             yield GaugeMetricFamily(f"semwm_{name}", documentation, value=float(value))
 

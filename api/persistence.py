@@ -35,6 +35,7 @@ def attach_persistence(app: FastAPI, settings: Settings) -> Iterator[None]:
                 settings.data_dir,
                 service.knowledge,
                 reorder_window=settings.reorder_window,
+                hold=settings.hold,
                 sync=settings.sync,
                 snapshot_every=settings.snapshot_every,
                 compact_every=settings.compact_every,
@@ -49,7 +50,7 @@ def attach_persistence(app: FastAPI, settings: Settings) -> Iterator[None]:
 
             recorder = McapRecorder.create(settings.record, lambda: service.model)
             stack.callback(recorder.close)
-            recorder.start(service.knowledge, settings.reorder_window)
+            recorder.start(service.knowledge, settings.reorder_window, settings.hold)
             service.hooks.append(recorder)
             logger.info("recording to %s", settings.record)
         yield

@@ -251,11 +251,16 @@ class WorldService:
 
     @classmethod
     def from_file(
-        cls, path: Path, reorder_window: float = 0.5, write_back: bool = False, **options: Any
+        cls,
+        path: Path,
+        reorder_window: float = 0.5,
+        write_back: bool = False,
+        hold: float = 0.0,
+        **options: Any,
     ) -> WorldService:
         """Load ``path`` and build the world model (raises :class:`KnowledgeError`)."""
         return cls(
-            WorldModel(load_knowledge(path), reorder_window=reorder_window),
+            WorldModel(load_knowledge(path), reorder_window=reorder_window, hold=hold),
             path,
             write_back,
             **options,
@@ -534,6 +539,8 @@ class WorldService:
                 "hypotheses_log10_joint": self._model.log10_joint_hypotheses,
                 "clusters": self._model.cluster_count,
                 "tracks": self._model.track_count,
+                "held_scans": self._model.pending_scans,
+                "replayed_scans": self._model.replayed_scans,
                 "knowledge_version": self.knowledge_version,
             }
 

@@ -43,6 +43,11 @@ class Settings(BaseSettings):
     reorder_window
         Detections up to this many seconds older than the latest processed one are
         still accepted (re-ordered); older ones are refused with 409.
+    hold
+        Detections newer than the newest accepted one minus ``hold`` (s) are held and
+        processed in time order once older: arrivals out of order by less than the
+        hold cost no replay (queries still include them). 0: process at once. About
+        the sources' arrival jitter (docs/operations.md).
     max_batch
         The largest batch ``POST /detections`` accepts.
     max_ahead, max_jump
@@ -111,6 +116,7 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: Annotated[int, Field(ge=0, le=65535)] = 8000
     reorder_window: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 0.5
+    hold: Annotated[float, Field(ge=0.0, le=60.0, allow_inf_nan=False)] = 0.0
     max_batch: Annotated[int, Field(ge=1)] = 10000
     write_back: bool = False
     data_dir: Path | None = None

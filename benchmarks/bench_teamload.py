@@ -1,6 +1,6 @@
 """A team's load (issue 15 defect 6): 5 robots x 10 detections x 30 Hz on 20 shared objects.
 
-Run: ``python benchmarks/bench_teamload.py [--seconds 60] [--out FILE]``
+Run: ``python benchmarks/bench_teamload.py [--seconds 60] [--hold S] [--out FILE]``
 
 A real ``semwm serve --knowledge knowledge/sim1.yaml`` in its own process on a
 loopback port (:func:`bench_soak.launch`). Twenty static objects (cups and coke
@@ -92,6 +92,14 @@ def reader(url: str, until: threading.Event, out: dict[str, Any]) -> None:
     out["reader"] = latencies
 
 
+def _metric(text: str, name: str) -> float | None:
+    """A metric's value in Prometheus text (``None`` if absent)."""
+    for line in text.splitlines():
+        if line.startswith(name + " "):
+            return float(line.split()[1])
+    return None
+
+
 def percentiles(values: list[float]) -> dict[str, float]:
     ms = np.asarray(values) * 1e3
     return {
@@ -100,9 +108,10 @@ def percentiles(values: list[float]) -> dict[str, float]:
     }
 
 
-def run(seconds: float) -> dict[str, Any]:
+def run(seconds: float, hold: float = 0.0) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
-        process, url = launch(["--reorder-window", "1.0"], Path(tmp) / "server.log")
+        options = ["--reorder-window", "1.0", "--hold", str(hold)]
+        process, url = launch(options, Path(tmp) / "server.log")
         try:
             results: dict[str, Any] = {}
             done = threading.Event()
@@ -121,6 +130,7 @@ def run(seconds: float) -> dict[str, Any]:
             watcher.join()
             wall = time.monotonic() - start
             world = httpx.get(f"{url}/world", timeout=30).json()
+            metrics = httpx.get(f"{url}/metrics", timeout=30).text
         finally:
             process.terminate()
             process.wait(10)
@@ -139,6 +149,7 @@ def run(seconds: float) -> dict[str, Any]:
             "rate_hz": RATE_HZ,
             "objects": len(OBJECTS),
             "seconds": seconds,
+            "hold": hold,
         },
         "offered_det_per_s": offered,
         "processed_det_per_s": round(processed, 1),
@@ -147,6 +158,7 @@ def run(seconds: float) -> dict[str, Any]:
         "post_ms": post,
         "get_world_ms": percentiles(results["reader"]),
         "errors": sum(results[f"r{r}"]["errors"] for r in range(ROBOTS)),
+        "replayed_scans": _metric(metrics, "semwm_replayed_scans"),
         "objects_published": len(world["objects"]),
         "objects_seen": len(
             {(2 * r + k) % len(OBJECTS) for r in range(ROBOTS) for k in range(PER_BATCH)}
@@ -158,9 +170,10 @@ def run(seconds: float) -> dict[str, Any]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--hold", type=float, default=0.0, help="semwm serve --hold (s)")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "teamload.json")
     args = parser.parse_args()
-    result = run(args.seconds)
+    result = run(args.seconds, args.hold)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(json.dumps({k: v for k, v in result.items() if k != "machine"}, indent=2))

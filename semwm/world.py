@@ -14,7 +14,8 @@ changes nothing.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -88,6 +89,34 @@ class _LoggedScan:
 
 
 @dataclass(frozen=True)
+class _Held:
+    """A scan the hold keeps pending: its detections (numbered when accepted) and its
+    sensor view, in the order its batches came."""
+
+    key: ScanKey
+    measurements: tuple[Measurement, ...]
+    view: SensorView | None = None
+
+
+_Tables = tuple[dict[int, int], int, dict[int, "_Published"], dict[int, "_Published"]]
+"""The id tables: lineage -> id, the next id, the published and the lost objects."""
+_Link = tuple[_Held, MHFState, ConfidenceBook, _Tables]
+
+
+@dataclass(frozen=True)
+class _Tentative:
+    """The held scans processed on a copy, for queries: from the committed ``base``,
+    ``base_book`` and ``base_tables``, each held scan (in time order) with the state,
+    confidences and id tables after it. When a held scan is released, its link is
+    committed as it is (no second run)."""
+
+    base: MHFState
+    base_book: ConfidenceBook
+    base_tables: _Tables
+    chain: tuple[_Link, ...]
+
+
+@dataclass(frozen=True)
 class _Published:
     """An object as last published: its version (positions are computed only if its id
     has to be handed over)."""
@@ -104,12 +133,43 @@ _Floor = tuple[ScanKey, str]
 """No scan at or before this key may be processed any more, and why."""
 
 
+def _same_tables(a: _Tables, b: _Tables) -> bool:
+    """The same id tables (the same dicts, not equal ones)."""
+    return a[0] is b[0] and a[1] == b[1] and a[2] is b[2] and a[3] is b[3]
+
+
+def _same(a: Sequence[Measurement], b: Sequence[Measurement]) -> bool:
+    """The same detection objects in the same order."""
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b, strict=True))
+
+
+def _checked_hold(hold: float) -> float:
+    if hold < 0 or not math.isfinite(hold):
+        raise ValueError(f"hold must be a finite number >= 0 (s); got {hold}")
+    return float(hold)
+
+
 def _view_key(view: SensorView) -> ScanKey:
     return (view.time, view.source or "")
 
 
 def _scan_key(m: Measurement) -> ScanKey:
     return (m.time, m.source or "")
+
+
+def _grouped(
+    measurements: Sequence[Measurement], view: SensorView | None
+) -> tuple[dict[ScanKey, list[Measurement]], dict[ScanKey, SensorView]]:
+    """A batch's detections by scan (time, source), and its sensor view by scan."""
+    scans: dict[ScanKey, list[Measurement]] = {}
+    views: dict[ScanKey, SensorView] = {}
+    for m in measurements:
+        scans.setdefault(_scan_key(m), []).append(m)
+    if view is not None:
+        key = _view_key(view)
+        scans.setdefault(key, [])
+        views[key] = view
+    return scans, views
 
 
 def _stored_positions(tracks: Sequence[Track], dim: int) -> tuple[FloatArray, FloatArray]:
@@ -150,6 +210,15 @@ class WorldModel:
         Detections may arrive up to this many seconds (s) late and are still
         processed in time order (the scans after them are replayed); older ones
         raise :class:`~semwm.detection.OutOfOrderError`.
+    hold
+        Scans newer than the newest accepted time minus ``hold`` (s) are kept pending
+        and processed in time order once they are older than that, so sources whose
+        detections arrive up to ``hold`` s out of order cost no replay; only what
+        arrives later than the hold is replayed (within ``reorder_window``, counted
+        from the latest processed scan). Queries answer with the pending scans
+        included: they are processed on a copy that is not committed. ``0``
+        (default): every scan is processed at once. Choose about the sources'
+        arrival jitter (docs/operations.md).
 
     The reorder history is also bounded in count (:attr:`max_reorder_scans`): past
     it the oldest scans are forgotten, and a detection that would have to be
@@ -160,11 +229,14 @@ class WorldModel:
     max_reorder_scans = 1000
     """Most scans kept for replay; each holds a reference to the state before it."""
 
-    def __init__(self, knowledge: Knowledge, *, reorder_window: float = 0.0) -> None:
+    def __init__(
+        self, knowledge: Knowledge, *, reorder_window: float = 0.0, hold: float = 0.0
+    ) -> None:
         self._summaries: dict[int, tuple[Track, FloatArray, FloatArray, float]] = {}
         if reorder_window < 0 or not math.isfinite(reorder_window):
             raise ValueError(f"reorder_window must be a finite number >= 0; got {reorder_window}")
         self.reorder_window = reorder_window
+        self._hold = _checked_hold(hold)
         self._set_knowledge(knowledge)
         self.reset()
 
@@ -186,6 +258,32 @@ class WorldModel:
         self._next_id = 1
         self._published: dict[int, _Published] = {}
         self._lost: dict[int, _Published] = {}
+        self._pending: dict[ScanKey, _Held] = {}  # held scans (values immutable)
+        self._newest: float | None = None  # newest accepted time, pending included
+        self._tentative: _Tentative | None = None  # cache for queries
+        self.replayed_scans = 0  # logged scans processed again: an older one came after
+
+    @property
+    def hold(self) -> float:
+        """Seconds scans are kept pending (see the class); :meth:`set_hold` changes it."""
+        return self._hold
+
+    def set_hold(self, hold: float) -> None:
+        """Use another hold from now on; scans it no longer holds are processed now."""
+        self._hold = _checked_hold(hold)
+        if self._pending:
+            self._release()
+
+    @property
+    def pending_scans(self) -> int:
+        """Scans accepted and held, not yet processed (:attr:`hold`)."""
+        return len(self._pending)
+
+    @property
+    def processed_time(self) -> float | None:
+        """Time of the latest processed scan (s); behind :attr:`latest_time` by at most
+        :attr:`hold` while scans are pending."""
+        return self._state.time
 
     @property
     def knowledge(self) -> Knowledge:
@@ -197,12 +295,15 @@ class WorldModel:
 
     @property
     def latest_time(self) -> float | None:
-        """Time of the latest processed detection (s)."""
-        return self._state.time
+        """Time of the latest accepted detection (s), pending ones (:attr:`hold`)
+        included: the time queries answer at by default."""
+        return self._newest if self._pending else self._state.time
 
     @property
     def hypothesis_count(self) -> int:
-        """Hypotheses stored (the sum over clusters; see :attr:`log10_joint_hypotheses`)."""
+        """Hypotheses stored (the sum over clusters; see :attr:`log10_joint_hypotheses`).
+        This and the other counts are of the processed state (pending scans excluded:
+        they are cheap, read after every change)."""
         return self._state.hypothesis_count
 
     @property
@@ -234,6 +335,7 @@ class WorldModel:
                 f"{self._knowledge.world.dimension}: reset first"
             )
         MultipleHypothesisFilter(knowledge)  # fail here, before anything changes
+        self._release(everything=True)  # held scans were accepted under the old knowledge
         gone = {k for k, t in self._state.tracks.items() if t.cls not in knowledge.classes}
         old_names = self._mhf.associator.class_model.names
         self._set_knowledge(knowledge)
@@ -306,12 +408,80 @@ class WorldModel:
             keys = [_scan_key(m) for m in used] + ([_view_key(view)] if view is not None else [])
             if floor is not None and min(keys) <= floor[0]:
                 raise OutOfOrderError(earliest, latest, latest - floor[0][0], why=floor[1])
-        state, log, book, floor = self._process(used, view)
-        self._state, self._log, self._book, self._replay_floor = state, log, book, floor
+        if times:
+            newest = max(times)
+            self._newest = newest if self._newest is None else max(self._newest, newest)
+        if self._hold > 0 and (used or view is not None):
+            self._hold_scans(*_grouped(used, view))
+        else:
+            self._commit(*self._process(used, view))
+            if used or view is not None:
+                self._publish()
         self._seq += len(batch)
-        if used or view is not None:
+        return IngestResult(applied=len(used), time=self.latest_time, ignored=ignored)
+
+    def _commit(
+        self, state: MHFState, log: list[_LoggedScan], book: ConfidenceBook, floor: _Floor | None
+    ) -> None:
+        self._state, self._log, self._book, self._replay_floor = state, log, book, floor
+
+    def _hold_scans(
+        self, scans: dict[ScanKey, list[Measurement]], views: dict[ScanKey, SensorView]
+    ) -> None:
+        """Scans before the latest processed one are processed now (replayed); the others
+        join the pending ones, and those the hold no longer keeps are processed."""
+        time = self._state.time
+        last = self._log[-1].key if self._log else None
+        late = [
+            k
+            for k in scans
+            if time is not None and (k[0] < time or (last is not None and k <= last))
+        ]
+        if late:
+            self._commit(
+                *self._process_scans(
+                    {k: scans[k] for k in late}, {k: views[k] for k in late if k in views}
+                )
+            )
             self._publish()
-        return IngestResult(applied=len(used), time=self._state.time, ignored=ignored)
+        for key, measurements in scans.items():
+            if key in late:
+                continue
+            held = self._pending.get(key)
+            view = views.get(key)
+            if held is not None:  # another batch of a held scan: its view replaces the held one
+                measurements = [*held.measurements, *measurements]
+                view = view if view is not None else held.view
+            self._pending[key] = _Held(key, tuple(measurements), view)
+        self._release()
+
+    def _release(self, everything: bool = False) -> None:
+        """Process, one at a time in time order, the held scans older than the newest
+        accepted time minus :attr:`hold` (``everything``: all), publishing after each as
+        if each had come alone."""
+        assert self._newest is not None or not self._pending
+        boundary = math.inf if everything else (self._newest or 0.0) - self._hold + 1e-9
+        for key in sorted(self._pending):
+            if key[0] > boundary:
+                break
+            held = self._pending.pop(key)
+            views = {key: held.view} if held.view is not None else {}
+            cache = self._tentative
+            cached = (
+                self._fits(cache)
+                and cache is not None
+                and bool(cache.chain)
+                and cache.chain[0][0] is held
+            )
+            self._commit(*self._process_scans({key: list(held.measurements)}, views))
+            if cached and self._tentative is not None and self._tentative.base is self._state:
+                # the ids a query gave after this scan: what _publish gives here
+                ids, next_id, published, lost = self._tentative.base_tables
+                self._ids, self._next_id = dict(ids), next_id
+                self._published, self._lost = published, dict(lost)
+                self._tentative = replace(self._tentative, base_tables=self._tables())
+            else:
+                self._publish()
 
     def act(self, action: ActionReport | Mapping[str, Any]) -> list[int]:
         """Apply an action (paper 004 IV-B; :mod:`semwm.mhf.actions`): a kick splits every
@@ -348,9 +518,26 @@ class WorldModel:
             problem("near", f"near must have {dim} coordinates")
         if problems:
             raise DetectionError(problems)
-        latest = self._state.time
+        latest = self.latest_time  # held scans are processed before the action
         if latest is not None and report.time < latest - 1e-12:
             raise OutOfOrderError(report.time, latest, 0.0)
+        with self._including_pending():
+            lineages, moved = self._kicked(report, problems, problem)
+        self._release(everything=True)
+        direction = np.asarray(report.direction, dtype=float)
+        kick = Kick(report.time, lineages, direction / np.linalg.norm(direction), report.speed)
+        self._state = apply_kick(self._mhf, self._state, kick)
+        self._restart_reorder("an action")
+        self._publish()
+        return moved
+
+    def _kicked(
+        self,
+        report: ActionReport,
+        problems: list[DetectionProblem],
+        problem: Callable[[str, str], None],
+    ) -> tuple[set[int], list[int]]:
+        """The lineages and ids of the objects ``report`` kicks (raises ``DetectionError``)."""
         world = self.world(report.time, min_existence=1e-6)
         if report.object is not None:
             chosen = [o for o in world.objects if o.id == report.object]
@@ -377,13 +564,7 @@ class WorldModel:
         if problems:
             raise DetectionError(problems)
         by_id = {object_id: lineage for lineage, object_id in self._ids.items()}
-        lineages = {by_id.get(o.id, -1 - o.id) for o in chosen}
-        direction = np.asarray(report.direction, dtype=float)
-        kick = Kick(report.time, lineages, direction / np.linalg.norm(direction), report.speed)
-        self._state = apply_kick(self._mhf, self._state, kick)
-        self._restart_reorder("an action")
-        self._publish()
-        return [o.id for o in chosen]
+        return {by_id.get(o.id, -1 - o.id) for o in chosen}, [o.id for o in chosen]
 
     def _view(
         self, sensor: SensorReport | Mapping[str, Any], measurements: Sequence[Measurement]
@@ -421,6 +602,9 @@ class WorldModel:
         if detector not in self._knowledge.detectors:
             problem("detector", f"unknown detector {detector!r}")
         by_id = {object_id: lineage for lineage, object_id in self._ids.items()}
+        if self._pending and any(i not in by_id for i in report.looking_at):
+            with self._including_pending():  # ids queries showed, held scans included
+                by_id = {object_id: lineage for lineage, object_id in self._ids.items()}
         unknown = [i for i in report.looking_at if i not in by_id]
         if unknown:
             problem("looking_at", f"no object with id {unknown[0]} in the world")
@@ -445,16 +629,15 @@ class WorldModel:
         (raised past the newest scan dropped to keep it within :attr:`max_reorder_scans`)."""
         if not measurements and view is None:
             return self._state, self._log, self._book, self._replay_floor
-        scans: dict[ScanKey, list[Measurement]] = {}
-        views: dict[ScanKey, SensorView] = {}
-        for m in measurements:
-            scans.setdefault(_scan_key(m), []).append(m)
-        if view is not None:
-            key = _view_key(view)
-            scans.setdefault(key, [])
-            views[key] = view
+        return self._process_scans(*_grouped(measurements, view))
+
+    def _process_scans(
+        self, scans: dict[ScanKey, list[Measurement]], views: dict[ScanKey, SensorView]
+    ) -> tuple[MHFState, list[_LoggedScan], ConfidenceBook, _Floor | None]:
+        """:meth:`_process` of scans grouped by key (``scans`` not empty; changed here)."""
         first = min(scans)
         start = next((i for i, s in enumerate(self._log) if s.key >= first), len(self._log))
+        self.replayed_scans += len(self._log) - start
         if start < len(self._log):
             state, book = self._log[start].before, self._log[start].book
         else:
@@ -467,11 +650,7 @@ class WorldModel:
         for key in sorted(scans):
             before, before_book = state, book
             scan_view = views.get(key)
-            state = self._mhf.process_scan(state, scans[key], scan_view)
-            if self._mhf.mht:
-                book = advance(
-                    book, state, scans[key], scan_view, self._knowledge, self._mhf.factory
-                )
+            state, book = self._step(state, book, scans[key], scan_view)
             log.append(_LoggedScan(key, tuple(scans[key]), before, scan_view, before_book))
         assert state.time is not None
         horizon = state.time - self.reorder_window
@@ -485,6 +664,97 @@ class WorldModel:
             )
             log = log[dropped:]
         return state, log, book, floor
+
+    # ------------------------------------------------------------------ held scans
+    @contextmanager
+    def _including_pending(self) -> Iterator[None]:
+        """Within: the model as if each held scan had been ingested now, in time order
+        (state, confidences and ids), with none held; after: exactly as before.
+
+        This is how queries include every accepted detection without committing the
+        held scans (committing early would make a later scan within the hold a
+        replay, and what is accepted would depend on when someone asked). It costs
+        one :meth:`MultipleHypothesisFilter.process_scan` and one :meth:`_publish` per
+        held scan not yet in the cache (:meth:`_tentative_chain`); a released scan the
+        cache holds is committed from it, so a scan is processed once either way.
+        """
+        if not self._pending:
+            yield
+            return
+        saved = (
+            self._state, self._book, self._pending, self._ids, self._next_id,
+            self._published, self._lost, self._summaries,
+        )  # fmt: skip
+        try:
+            _, self._state, self._book, tables = self._tentative_chain()[-1]
+            self._pending = {}
+            self._ids, self._next_id, self._published, self._lost = tables
+            yield
+        finally:
+            (
+                self._state, self._book, self._pending, self._ids, self._next_id,
+                self._published, self._lost, self._summaries,
+            ) = saved  # fmt: skip
+
+    def _tables(self) -> _Tables:
+        return self._ids, self._next_id, self._published, self._lost
+
+    def _fits(self, cache: _Tentative | None) -> bool:
+        """Whether ``cache`` starts from the committed state, confidences and ids."""
+        return (
+            cache is not None
+            and cache.base is self._state
+            and cache.base_book is self._book
+            and _same_tables(cache.base_tables, self._tables())
+        )
+
+    def _tentative_chain(self) -> tuple[_Link, ...]:
+        """Each held scan (time order) with the state, confidences and id tables after
+        it, from the committed ones; not committed (the model's attributes are changed
+        and must be restored: :meth:`_including_pending`). Cached: the cached scans that
+        are still the first held ones are not run again."""
+        held = [self._pending[k] for k in sorted(self._pending)]
+        cache = self._tentative
+        chain: list[_Link] = []
+        if self._fits(cache):
+            assert cache is not None
+            for link, scan in zip(cache.chain, held, strict=False):
+                if link[0] is not scan:
+                    break
+                chain.append(link)
+        base = self._state, self._book, self._tables()
+        state, book, tables = chain[-1][1:] if chain else base
+        for scan in held[len(chain) :]:
+            state, book = self._step(state, book, list(scan.measurements), scan.view)
+            ids, next_id, published, lost = tables  # tables in a link are never changed
+            self._state, self._ids, self._next_id = state, dict(ids), next_id
+            self._published, self._lost = published, dict(lost)
+            self._publish()
+            tables = self._tables()
+            chain.append((scan, state, book, tables))
+        self._tentative = _Tentative(base[0], base[1], base[2], tuple(chain))
+        return tuple(chain)
+
+    def _step(
+        self,
+        state: MHFState,
+        book: ConfidenceBook,
+        measurements: list[Measurement],
+        view: SensorView | None,
+    ) -> tuple[MHFState, ConfidenceBook]:
+        """One scan processed: the MHF (paper 002) and the confidences (paper 004). The
+        first scan of the query cache, from the same state, is taken from it: the same
+        values, computed once."""
+        cache = self._tentative
+        if cache is not None and cache.chain and cache.base is state and cache.base_book is book:
+            held, after, after_book, tables = cache.chain[0]
+            if held.view is view and _same(held.measurements, measurements):
+                self._tentative = _Tentative(after, after_book, tables, cache.chain[1:])
+                return after, after_book
+        state = self._mhf.process_scan(state, measurements, view)
+        if self._mhf.mht:
+            book = advance(book, state, measurements, view, self._knowledge, self._mhf.factory)
+        return state, book
 
     # ------------------------------------------------------------------ ids
     def _publish(self) -> None:
@@ -815,6 +1085,9 @@ class WorldModel:
             Only objects in this confidence state (``valid``, ``suspicious``,
             ``invalid``) or these states (paper 004 Fig. 5; ``mht`` only).
         """
+        if self._pending:  # every accepted detection included, nothing committed
+            with self._including_pending():
+                return self.world(time, cls, near, label, min_existence, confidence)
         dim = self._knowledge.world.dimension
         if cls is not None and cls not in self._knowledge.classes:
             known = ", ".join(sorted(self._knowledge.classes))
@@ -924,6 +1197,9 @@ class WorldModel:
         """The ``k`` most probable hypotheses with their probabilities and objects."""
         if k < 1:
             raise ValueError(f"k must be at least 1; got {k}")
+        if self._pending:  # every accepted detection included, nothing committed
+            with self._including_pending():
+                return self.hypotheses(k)
         state = self._state
         dim = self._knowledge.world.dimension
         summaries = []

@@ -133,7 +133,7 @@ def _start_recorder(path: Path, replayer: Replayer) -> Any:
         return last[0]
 
     recorder = McapRecorder.create(path, lambda: replayer.model or model, scenario_clock)
-    recorder.start(model.knowledge, replayer.reorder_window)
+    recorder.start(model.knowledge, replayer.reorder_window, replayer.hold)
     return recorder
 
 

@@ -22,10 +22,11 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="run the HTTP service",
         description="Run the semwm HTTP service (OpenAPI at /docs). Every option can also be "
         "set from the environment: SEMWM_KNOWLEDGE, SEMWM_HOST, SEMWM_PORT, "
-        "SEMWM_REORDER_WINDOW, SEMWM_MAX_BATCH, SEMWM_WRITE_BACK, SEMWM_TOKEN, SEMWM_TOKEN_FILE, "
-        "SEMWM_READ_TOKEN, SEMWM_INSECURE, SEMWM_CORS_ORIGINS, SEMWM_ALLOWED_HOSTS (JSON lists), "
-        "SEMWM_MAX_BODY, SEMWM_MAX_SOURCES, SEMWM_STUCK_AFTER, SEMWM_MQTT, SEMWM_MQTT_PREFIX, "
-        "SEMWM_MQTT_WORLD_RATE, SEMWM_MQTT_CLIENT_ID, SEMWM_FOXGLOVE_PORT, SEMWM_LOG_FORMAT. "
+        "SEMWM_REORDER_WINDOW, SEMWM_HOLD, SEMWM_MAX_BATCH, SEMWM_WRITE_BACK, SEMWM_TOKEN, "
+        "SEMWM_TOKEN_FILE, SEMWM_READ_TOKEN, SEMWM_INSECURE, SEMWM_CORS_ORIGINS, "
+        "SEMWM_ALLOWED_HOSTS (JSON lists), SEMWM_MAX_BODY, SEMWM_MAX_SOURCES, "
+        "SEMWM_STUCK_AFTER, SEMWM_MQTT, SEMWM_MQTT_PREFIX, SEMWM_MQTT_WORLD_RATE, "
+        "SEMWM_MQTT_CLIENT_ID, SEMWM_FOXGLOVE_PORT, SEMWM_LOG_FORMAT. "
         "The live world page is at /, its stream at /world/stream, Prometheus metrics at "
         "/metrics (docs/operations.md).",
     )
@@ -33,6 +34,12 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--host", help="address to bind (default 127.0.0.1)")
     parser.add_argument("--port", type=int, help="port (default 8000; 0 picks a free one)")
     parser.add_argument("--reorder-window", type=float, help="seconds (default 0.5)")
+    parser.add_argument(
+        "--hold",
+        type=float,
+        help="seconds detections are held to be processed in time order without replay "
+        "(default 0; about the sources' arrival jitter)",
+    )
     parser.add_argument("--max-batch", type=int, help="largest batch (default 10000)")
     parser.add_argument(
         "--write-back",
@@ -159,6 +166,7 @@ def run_serve(args: argparse.Namespace) -> int:
             "host",
             "port",
             "reorder_window",
+            "hold",
             "max_batch",
             "write_back",
             "foxglove_port",

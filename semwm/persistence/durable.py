@@ -98,6 +98,7 @@ class DurableWorld:
         knowledge: Knowledge | None = None,
         *,
         reorder_window: float = 0.0,
+        hold: float = 0.0,
         sync: SyncPolicy = "always",
         snapshot_every: int = 1000,
         compact_every: int = 100_000,
@@ -105,7 +106,8 @@ class DurableWorld:
         """Open (or create) ``data_dir``.
 
         A new directory needs ``knowledge``. In an existing one the world is restored
-        as it was; then, if ``knowledge`` (or ``reorder_window``) differs from the
+        as it was (held scans too: the journal replays the same ingests); then, if
+        ``knowledge`` (or ``reorder_window`` or ``hold``) differs from the
         restored one, it is applied as a journaled change, like a reload.
         """
         if snapshot_every < 1 or compact_every < 1:
@@ -122,15 +124,16 @@ class DurableWorld:
         if model is None:
             assert knowledge is not None
             recovery.new = True
-            model = WorldModel(knowledge, reorder_window=reorder_window)
+            model = WorldModel(knowledge, reorder_window=reorder_window, hold=hold)
             with journal.transaction():
-                journal.append(config_record(reorder_window))
+                journal.append(config_record(reorder_window, hold))
                 journal.append(knowledge_record(knowledge))
             return cls(journal, model, recovery, snapshot_every, compact_every)
         world = cls(journal, model, recovery, snapshot_every, compact_every)
-        if reorder_window != model.reorder_window:
-            with world.applying(config_record(reorder_window)):
+        if reorder_window != model.reorder_window or hold != model.hold:
+            with world.applying(config_record(reorder_window, hold)):
                 model.reorder_window = reorder_window
+                model.set_hold(hold)
         if knowledge is not None and knowledge.document != model.knowledge.document:
             recovery.knowledge_changed = True
             logger.warning(
@@ -251,7 +254,7 @@ def _restore(journal: Journal, recovery: Recovery) -> WorldModel | None:
                 "snapshot %d not used: %s; rebuilding from the journal", snapshot.seq, error
             )
             continue
-        replayer = Replayer(reorder_window=model.reorder_window)
+        replayer = Replayer(reorder_window=model.reorder_window, hold=model.hold)
         replayer.model = model
         replayer.last_seq = snapshot.seq
         recovery.snapshot_seq = snapshot.seq

@@ -286,9 +286,9 @@ class McapRecorder:
     ) -> McapRecorder:
         return cls(Path(path).open("wb"), model, clock)
 
-    def start(self, knowledge: Knowledge, reorder_window: float) -> None:
+    def start(self, knowledge: Knowledge, reorder_window: float, hold: float = 0.0) -> None:
         """Write the settings and knowledge the recording starts from."""
-        for record in (config_record(reorder_window), knowledge_record(knowledge)):
+        for record in (config_record(reorder_window, hold), knowledge_record(knowledge)):
             self.write_change(record)
         self._handle.flush()
 

@@ -48,8 +48,8 @@ class Record:
         ``batch`` (payload: list of detections as dicts, or ``{"detections": [...],
         "sensor": {...}}`` for a scan with its sensor's view), ``knowledge`` (payload:
         ``{"document": ..., "source": ...}``), ``reset`` (payload ``null``), ``config``
-        (payload: ``{"reorder_window": s}``) or ``action`` (payload: the action as
-        ``POST /actions`` took it).
+        (payload: ``{"reorder_window": s}``, with ``"hold": s`` when not 0) or
+        ``action`` (payload: the action as ``POST /actions`` took it).
     payload
         JSON-compatible value.
     wall_time
@@ -121,8 +121,13 @@ def reset_record() -> Record:
     return Record(0, "reset", None)
 
 
-def config_record(reorder_window: float) -> Record:
-    return Record(0, "config", {"reorder_window": reorder_window})
+def config_record(reorder_window: float, hold: float = 0.0) -> Record:
+    """The settings that change how batches apply; ``hold`` only when not 0 (journals
+    written before the hold existed read the same)."""
+    payload: dict[str, float] = {"reorder_window": reorder_window}
+    if hold:
+        payload["hold"] = hold
+    return Record(0, "config", payload)
 
 
 class RecordError(ValueError):

@@ -62,8 +62,8 @@ class Replayer:
     knowledge
         Replay into this knowledge instead of the recorded one (recorded
         knowledge changes are skipped; batches it refuses are counted).
-    reorder_window
-        The reorder window until a ``config`` record says otherwise.
+    reorder_window, hold
+        The reorder window and hold until a ``config`` record says otherwise.
     strict
         Raise on a refused batch (a journal of accepted batches never has one).
     """
@@ -73,12 +73,14 @@ class Replayer:
         knowledge: Knowledge | None = None,
         reorder_window: float = 0.0,
         strict: bool = True,
+        hold: float = 0.0,
     ) -> None:
         self.override = knowledge
         self.reorder_window = reorder_window
+        self.hold = hold
         self.strict = strict
         self.model: WorldModel | None = (
-            WorldModel(knowledge, reorder_window=reorder_window) if knowledge else None
+            WorldModel(knowledge, reorder_window=reorder_window, hold=hold) if knowledge else None
         )
         self.counts = ReplayCounts()
         self.last_seq = 0
@@ -90,15 +92,19 @@ class Replayer:
         if record.kind == "config":
             window = float(record.payload["reorder_window"])
             self.reorder_window = window
+            self.hold = float(record.payload.get("hold", 0.0))
             if self.model is not None:
                 self.model.reorder_window = window
+                self.model.set_hold(self.hold)
         elif record.kind == "knowledge":
             if self.override is not None:
                 self.counts.skipped_knowledge += 1
             else:
                 knowledge = knowledge_from_payload(record.payload, where)
                 if self.model is None:
-                    self.model = WorldModel(knowledge, reorder_window=self.reorder_window)
+                    self.model = WorldModel(
+                        knowledge, reorder_window=self.reorder_window, hold=self.hold
+                    )
                 else:
                     self.model.replace_knowledge(knowledge)
         elif record.kind == "reset":

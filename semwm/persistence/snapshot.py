@@ -83,7 +83,11 @@ def restore_snapshot(snapshot: Snapshot) -> WorldModel:
         state: dict[str, Any] = pickle.loads(snapshot.state)
     except Exception as error:  # a damaged or foreign pickle: rebuild, never misread
         raise SnapshotMismatch(f"snapshot does not unpickle: {error}") from None
-    model = WorldModel(knowledge, reorder_window=float(state.get("reorder_window", 0.0)))
+    model = WorldModel(
+        knowledge,
+        reorder_window=float(state.get("reorder_window", 0.0)),
+        hold=float(state.get("_hold", 0.0)),
+    )
     expected = {k for k in vars(model) if k not in _DERIVED}
     if set(state) != expected:
         raise SnapshotMismatch(

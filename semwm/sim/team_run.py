@@ -70,7 +70,9 @@ class Network:
     (s); ``sync``: estimate the offsets; ``hold``: the receiver's reorder window or
     sorting delay (s), by default the largest latency plus 50 ms (0 without
     latency); ``receiver``: ``"reorder"`` (process on arrival, replay within
-    ``hold``) or ``"hold"`` (sorting buffer; see the module docstring).
+    ``hold``) or ``"hold"`` (sorting buffer; see the module docstring);
+    ``model_hold``: the ``"reorder"`` receiver's :attr:`WorldModel.hold` (s): scans
+    that newer ones overtook by less than it are processed in order, not replayed.
     """
 
     max_offset: float = 0.0
@@ -79,6 +81,7 @@ class Network:
     sync_period: float = 0.2
     hold: float | None = None
     receiver: Literal["reorder", "hold"] = "reorder"
+    model_hold: float = 0.0
 
     def __post_init__(self) -> None:
         if self.receiver not in ("reorder", "hold"):
@@ -177,6 +180,7 @@ def run_team(
     receiver = WorldModel(
         global_knowledge(knowledge) if levels == 2 else knowledge,
         reorder_window=net.hold_time if reorder else 0.0,
+        hold=net.model_hold if reorder else 0.0,
     )
     locals_ = {s: LocalModel(s, knowledge, strategy) for s in sources} if levels == 2 else {}
     phase_rng = np.random.default_rng(20_000 + seed)
@@ -324,6 +328,7 @@ def run_team(
         offset_errors=errors,
         peer_label_rate=peer_label_rate(scenario.truth, worlds),
         nees=mean_nees(scenario.truth, worlds),
+        extra={"replayed_scans": receiver.replayed_scans},
     )
 
 
