@@ -11,6 +11,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,20 @@ KILL_ROUNDS = 3
 _LISTENING = re.compile(r"Uvicorn running on (http://127\.0\.0\.1:\d+)")
 
 
+_STARTED: list[subprocess.Popen[bytes]] = []
+
+
+@pytest.fixture(autouse=True)
+def _no_server_left() -> Iterator[None]:
+    """A failed assertion leaves no server running after its test."""
+    yield
+    while _STARTED:
+        process = _STARTED.pop()
+        if process.poll() is None:
+            process.kill()
+            process.wait(10)
+
+
 class Server:
     """``semwm serve --port 0 --data-dir DIR`` in a subprocess (so it can be SIGKILLed)."""
 
@@ -39,6 +54,7 @@ class Server:
         self.log = log
         with log.open("w") as out:
             self.process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT)
+        _STARTED.append(self.process)
         deadline = time.monotonic() + 30
         while True:
             found = _LISTENING.search(log.read_text())
