@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from categories.test_kick import KNOWLEDGE as KICK_KNOWLEDGE
 
 from semwm import load_knowledge
 from semwm.detection import DetectionError, OutOfOrderError
@@ -206,23 +207,7 @@ def test_hold_must_be_a_finite_number_not_below_0(sim1: Knowledge) -> None:
             WorldModel(sim1, hold=bad)
 
 
-KICKABLE = """
-world: {dimension: 2, region: [[-10, 10], [-10, 10]]}
-classes:
-- name: Ball
-  category: passive
-  detection_frequency: 10
-  filter: {type: kalman, model: {motion_model: first_order, system_noise: [[0.05, 0], [0, 0.05]]}}
-  measurement_noise: [[0.0025, 0], [0, 0.0025]]
-  initial_velocity_covariance: [[0.01, 0], [0, 0.01]]
-  velocity_decay: 0.3
-- name: Post
-  category: static
-  detection_frequency: 10
-  filter: {type: kalman, model: {motion_model: zeroth_order, system_noise: [[0.001, 0], [0, 0.001]]}}
-  measurement_noise: [[0.0025, 0], [0, 0.0025]]
-detectors: [{name: camera, clutter_frequency: 0.5}]
-"""  # tests/categories/test_kick.py's
+KICKABLE = KICK_KNOWLEDGE  # a ball to kick and a post (tests/categories/test_kick.py)
 KICK = {"time": 1.0, "type": "kick", "source": "me", "near": [0.1, 0.0], "direction": [0, 3],
         "speed": 2.0}  # fmt: skip
 
