@@ -10,6 +10,7 @@ detection acknowledged before it, none half-applied). Domain errors become
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections import OrderedDict
@@ -27,6 +28,7 @@ from api.errors import (
     Loc,
     NotFoundError,
 )
+from api.ordered_lock import TimeOrderedLock
 from semwm import IngestResult, WorldModel, load_knowledge
 from semwm.clock import Exchange
 from semwm.detection import Detection, DetectionError, DetectionProblem, OutOfOrderError
@@ -180,7 +182,7 @@ class WorldService:
         clock: Callable[[], float] = time.time,
     ) -> None:
         self._model = model
-        self._lock = threading.Lock()
+        self._lock = TimeOrderedLock()  # queued scans enter in time order: no replay
         self.knowledge_path = knowledge_path
         self.write_back = write_back
         self.max_sources = max_sources
@@ -269,9 +271,10 @@ class WorldService:
     # -- the lock and the commit order ----------------------------------------------------------
 
     @contextmanager
-    def _locked(self) -> Iterator[None]:
-        """Hold the world's lock, noting since when (for ``/ready``)."""
-        with self._lock:
+    def _locked(self, order: float = -math.inf) -> Iterator[None]:
+        """Hold the world's lock, noting since when (for ``/ready``). Waiters enter by
+        smallest ``order`` (a scan's time; others ``-inf``): :class:`TimeOrderedLock`."""
+        with self._lock.ordered(order):
             self._busy_since = time.monotonic()
             try:
                 yield
@@ -300,6 +303,22 @@ class WorldService:
         self._failure = None
         self._summary = self._summarise()
 
+    def _scan_order(
+        self, detections: Sequence[Detection | dict[str, Any]], sensor: dict[str, Any] | None
+    ) -> float:
+        """A batch's place among queued ones: its earliest time on the service clock
+        (with today's clock offsets; only the order of entry depends on it)."""
+        stamps = [_stamp(d) for d in detections]
+        if sensor is not None:
+            stamps.append((sensor.get("source", _first_source(detections)), sensor.get("time")))
+        with self._sources_lock:
+            times = [
+                self.sources.to_service_time(source, t)
+                for source, t in stamps
+                if isinstance(t, int | float) and not isinstance(t, bool)
+            ]
+        return min(times, default=-math.inf)
+
     def _summarise(self) -> dict[str, Any]:
         return {
             "time": self._model.latest_time,
@@ -323,7 +342,7 @@ class WorldService:
         ``key`` (an idempotency key): a key seen among the recent ones is answered as
         the first time, and nothing is applied again.
         """
-        with self._locked():
+        with self._locked(self._scan_order(detections, sensor)):
             if key is not None and key in self._recent:
                 self._recent.move_to_end(key)
                 earlier = self._recent[key]
@@ -737,3 +756,10 @@ def _first_source(detections: Sequence[dict[str, Any] | Detection]) -> str | Non
         source = d.source if isinstance(d, Detection) else d.get("source")
         return source if isinstance(source, str) else None
     return None
+
+
+def _stamp(d: dict[str, Any] | Detection) -> tuple[str | None, Any]:
+    """A detection's (source, time) as sent."""
+    if isinstance(d, Detection):
+        return d.source, d.time
+    return d.get("source"), d.get("time")
