@@ -6,6 +6,7 @@ read and the world model built in the lifespan, when the server starts.
 
 from __future__ import annotations
 
+import gc
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -22,6 +23,7 @@ from api.deps import get_world
 from api.errors import BugBarrier, install_error_handlers
 from api.feed import WorldFeed
 from api.guard import RequestGuard
+from api.ingest_fast import FastIngest
 from api.logs import RequestIdMiddleware
 from api.metrics import DetectionMetricsMiddleware, Metrics
 from api.offline_docs import install_offline_docs
@@ -58,11 +60,14 @@ every problem, and leave the world as it was.
 """
 
 
-def create_app(settings: Settings) -> FastAPI:
+def create_app(settings: Settings, *, fast_ingest: bool = True) -> FastAPI:
     """Build the application.
 
     The world model is built from ``settings.knowledge`` when the app starts
     (lifespan). Tests may instead override :func:`api.deps.get_world`.
+    ``fast_ingest``: accepted ``POST /detections`` batches are answered by
+    :class:`api.ingest_fast.FastIngest`; ``False`` sends every one through the route
+    (the tests compare the two).
     """
 
     @asynccontextmanager
@@ -88,6 +93,10 @@ def create_app(settings: Settings) -> FastAPI:
                 # The bridge starts on the restored model (queued batches apply at once and
                 # are journaled) and stops before the journal closes.
                 bridge = _start_mqtt(app, settings) if settings.mqtt is not None else None
+                # What start-up built lives as long as the process: keep it out of the
+                # collector's full passes, which the world's many short-lived objects
+                # trigger (about 15 % of the server's CPU on a team's load).
+                gc.freeze()
                 try:
                     yield
                 finally:
@@ -127,7 +136,7 @@ def create_app(settings: Settings) -> FastAPI:
         app.include_router(module.router)
     install_offline_docs(app)
     app.mount("/static", StaticFiles(directory=live.STATIC_DIR), name="static")
-    _add_guards(app, settings)
+    _add_guards(app, settings, fast_ingest)
     # Outside the guards: refused requests are counted and get a request id too.
     app.add_middleware(DetectionMetricsMiddleware, metrics=app.state.metrics)
     app.add_middleware(RequestIdMiddleware)
@@ -149,12 +158,15 @@ def create_app(settings: Settings) -> FastAPI:
     return app
 
 
-def _add_guards(app: FastAPI, settings: Settings) -> None:
+def _add_guards(app: FastAPI, settings: Settings, fast_ingest: bool) -> None:
     """Tokens, browser safety and body limits (:mod:`api.guard`), CORS, allowed hosts.
 
     The last added runs first: the ``Host`` check, then CORS (preflights), then the
     guard, then the barrier that answers a bug with a 500.
     """
+    # Innermost: after every guard, accepted batches skip the framework (api.ingest_fast).
+    if fast_ingest:
+        app.add_middleware(FastIngest, service=lambda: _service(app), max_batch=settings.max_batch)
     app.add_middleware(BugBarrier)
     app.add_middleware(
         RequestGuard,

@@ -159,12 +159,21 @@ def run(seconds: float, hold: float = 0.0) -> dict[str, Any]:
         "get_world_ms": percentiles(results["reader"]),
         "errors": sum(results[f"r{r}"]["errors"] for r in range(ROBOTS)),
         "replayed_scans": _metric(metrics, "semwm_replayed_scans"),
+        # the world model's part of an accepted batch, under the lock (the rest: HTTP)
+        "apply_ms_mean": _mean_ms(metrics, "semwm_ingest_apply_seconds"),
+        "server_ms_mean": _mean_ms(metrics, "semwm_ingest_latency_seconds"),
         "objects_published": len(world["objects"]),
         "objects_seen": len(
             {(2 * r + k) % len(OBJECTS) for r in range(ROBOTS) for k in range(PER_BATCH)}
         ),
         "target_met": bool(processed >= 0.98 * offered and post["p99"] < 50.0),
     }
+
+
+def _mean_ms(metrics: str, histogram: str) -> float:
+    """Mean (ms) of a Prometheus histogram in ``metrics``: its _sum over its _count."""
+    count = _metric(metrics, f"{histogram}_count")
+    return round(1000.0 * _metric(metrics, f"{histogram}_sum") / count, 2) if count else 0.0
 
 
 def main() -> None:
