@@ -42,6 +42,7 @@ from semwm.filters.motion import FloatArray
 from semwm.filters.small import mahalanobis_squared
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
+from semwm.mhf import nearby
 from semwm.mhf.actions import Kick, apply_kick
 from semwm.mhf.existence import inside_probability
 from semwm.mhf.filter import MultipleHypothesisFilter
@@ -963,13 +964,26 @@ class WorldModel:
         x, P = position[rows], covariance[rows]
         # cheap bound first (d^2 <= gate * lambda_max(S) <= gate * trace(S)), then the
         # Mahalanobis distance of the pairs that pass it only
-        delta = x[:, None, :] - x[None, :, :]
         spread = np.trace(P, axis1=1, axis2=2)
-        near = (delta * delta).sum(-1) <= _SAME_OBJECT_GATE * (spread[:, None] + spread[None, :])
-        aa, bb = np.nonzero(near)
-        upper = aa < bb  # each pair once
-        aa, bb = aa[upper], bb[upper]
-        d2 = mahalanobis_squared(delta[aa, bb], P[aa] + P[bb])
+        if len(candidates) ** 2 > nearby.DENSE_PAIRS and nearby.usable(x, spread):
+            # a k-d tree: the pairs the dense test below finds, in its order. A pair
+            # within the bound is within sqrt(2 gate s) of the one with more spread s.
+            aa, bb = nearby.close_pairs(x, np.sqrt(2.0 * _SAME_OBJECT_GATE * spread))
+            pair_delta = x[aa] - x[bb]
+            near = (pair_delta * pair_delta).sum(-1) <= _SAME_OBJECT_GATE * (
+                spread[aa] + spread[bb]
+            )
+            aa, bb, pair_delta = aa[near], bb[near], pair_delta[near]
+        else:
+            delta = x[:, None, :] - x[None, :, :]
+            near = (delta * delta).sum(-1) <= _SAME_OBJECT_GATE * (
+                spread[:, None] + spread[None, :]
+            )
+            aa, bb = np.nonzero(near)
+            upper = aa < bb  # each pair once
+            aa, bb = aa[upper], bb[upper]
+            pair_delta = delta[aa, bb]
+        d2 = mahalanobis_squared(pair_delta, P[aa] + P[bb])
         close = d2 <= _SAME_OBJECT_GATE
         for a, b in zip(aa[close].tolist(), bb[close].tolist(), strict=True):
             first, second = candidates[int(a)], candidates[int(b)]

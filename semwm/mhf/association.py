@@ -47,6 +47,7 @@ from semwm.filters.small import inverse_and_log_det, mahalanobis_squared, quadra
 from semwm.knowledge.coverage import birth_volume, coverage_volume
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
+from semwm.mhf import nearby
 from semwm.mhf.classes import ClassModel
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted, conform
@@ -327,28 +328,35 @@ class Associator:
             likelihood: FloatArray = reported @ probs.T  # (D, T)
         else:
             likelihood = self._class_likelihoods(tracks, measurements)  # (D, T): eq. (8)
-        diff = z[:, None, :] - predicted.position[None, :, :]  # (D, T, d)
-        labelled = self._label_pairs(predicted, measurements, diff) if mht else None
-        candidate = likelihood > 0.0
-        if math.isfinite(self.gate):
-            # Cheap bound first: d^2 <= gate * lambda_max(S) <= gate * trace(S).
-            bound = self.gate * (
-                np.trace(predicted.position_covariance, axis1=1, axis2=2)[None, :]
-                + np.trace(R, axis1=1, axis2=2)[:, None]
-            )
-            time_var = np.array([m.time_std * m.time_std for m in measurements])
-            if np.any(time_var > 0.0):  # trace(sigma_t^2 v v^T) = sigma_t^2 |v|^2
-                speed2 = (predicted.velocity(self.dim) ** 2).sum(-1)
-                bound = bound + self.gate * time_var[:, None] * speed2[None, :]
-            candidate &= (diff * diff).sum(-1) <= bound
-            if labelled is not None:
-                candidate |= labelled & (likelihood > 0.0)
-        jj, ii = np.nonzero(candidate)
+        sparse = self._sparse_gate(predicted, measurements, z, R, likelihood)
+        if sparse is not None:  # many pairs, no labels: a k-d tree finds the near ones
+            jj, ii, pair_diff = sparse
+            labelled = None
+            diff = pair_diff  # only _label_robust reads the dense one (labels: dense path)
+        else:
+            diff = z[:, None, :] - predicted.position[None, :, :]  # (D, T, d)
+            labelled = self._label_pairs(predicted, measurements, diff) if mht else None
+            candidate = likelihood > 0.0
+            if math.isfinite(self.gate):
+                # Cheap bound first: d^2 <= gate * lambda_max(S) <= gate * trace(S).
+                bound = self.gate * (
+                    np.trace(predicted.position_covariance, axis1=1, axis2=2)[None, :]
+                    + np.trace(R, axis1=1, axis2=2)[:, None]
+                )
+                time_var = np.array([m.time_std * m.time_std for m in measurements])
+                if np.any(time_var > 0.0):  # trace(sigma_t^2 v v^T) = sigma_t^2 |v|^2
+                    speed2 = (predicted.velocity(self.dim) ** 2).sum(-1)
+                    bound = bound + self.gate * time_var[:, None] * speed2[None, :]
+                candidate &= (diff * diff).sum(-1) <= bound
+                if labelled is not None:
+                    candidate |= labelled & (likelihood > 0.0)
+            jj, ii = np.nonzero(candidate)
+            pair_diff = diff[jj, ii]
         if jj.size == 0:
             return found
         R_pair = R[jj] + self._timing_noise(predicted, measurements, jj, ii)
         S = predicted.position_covariance[ii] + R_pair
-        d2 = mahalanobis_squared(diff[jj, ii], S)
+        d2 = mahalanobis_squared(pair_diff, S)
         passed = d2 <= self.gate
         if labelled is not None:
             passed |= labelled[jj, ii]
@@ -427,6 +435,44 @@ class Associator:
                         log_num += label_error
                 found[j][old.key] = (updated, log_num, rate - old.rate)
         return found
+
+    def _sparse_gate(
+        self,
+        predicted: Predicted,
+        measurements: Sequence[Measurement],
+        z: FloatArray,
+        R: FloatArray,
+        likelihood: FloatArray,
+    ) -> tuple[IndexArray, IndexArray, FloatArray] | None:
+        """The pairs that pass the cheap gate bound, and their differences, found with a
+        k-d tree (:mod:`semwm.mhf.nearby`): the same pairs in the same order as the
+        dense test, without its ``(D, T, d)`` arrays. ``None`` (use the dense test) for
+        few pairs, labelled detections, no gate, or non-finite values."""
+        if (
+            z.shape[0] * len(predicted.tracks) <= nearby.DENSE_PAIRS
+            or not math.isfinite(self.gate)
+            or any(m.label is not None for m in measurements)
+        ):
+            return None
+        position = predicted.position
+        trace_P = np.trace(predicted.position_covariance, axis1=1, axis2=2)
+        trace_R = np.trace(R, axis1=1, axis2=2)
+        time_var = np.array([m.time_std * m.time_std for m in measurements])
+        moving = bool(np.any(time_var > 0.0))
+        speed2 = (predicted.velocity(self.dim) ** 2).sum(-1) if moving else None
+        reach = trace_P + trace_R.max()
+        if speed2 is not None:
+            reach = reach + time_var.max() * speed2
+        if not nearby.usable(z, position, reach):
+            return None
+        jj, ii = nearby.within(z, position, np.sqrt(self.gate * reach))
+        # the dense test's bound, element for element
+        bound = self.gate * (trace_P[ii] + trace_R[jj])
+        if speed2 is not None:
+            bound = bound + self.gate * time_var[jj] * speed2[ii]
+        pair_diff = z[jj] - position[ii]
+        keep = (likelihood[jj, ii] > 0.0) & ((pair_diff * pair_diff).sum(-1) <= bound)
+        return jj[keep], ii[keep], pair_diff[keep]
 
     def _timing_noise(
         self,
