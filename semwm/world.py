@@ -17,7 +17,7 @@ import math
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from pydantic import ValidationError
@@ -117,10 +117,9 @@ class _Tentative:
     chain: tuple[_Link, ...]
 
 
-@dataclass(frozen=True)
-class _Published:
+class _Published(NamedTuple):
     """An object as last published: its version (positions are computed only if its id
-    has to be handed over)."""
+    has to be handed over). A named tuple: one is made per published object per scan."""
 
     track: Track
     lost_at: float | None = None  # when it left the published world
@@ -775,7 +774,7 @@ class WorldModel:
         memory = self._knowledge.world.id_memory
         for object_id, pub in list(self._published.items()):
             if pub.lineage not in current:
-                self._lost[object_id] = replace(pub, lost_at=now)
+                self._lost[object_id] = pub._replace(lost_at=now)
         if self._mhf.mht:  # ids wait id_memory seconds for their object to come back
             self._lost = {
                 i: p

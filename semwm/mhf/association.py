@@ -196,7 +196,8 @@ class Associator:
                     key = tracks[targets[i]].key
                     if log_num > presence.get(key, (0.0, -math.inf))[1]:
                         presence[key] = (relation.frequency, log_num)
-            presence = {k: v for k, v in presence.items() if v[1] > base_log}
+            if presence:
+                presence = {k: v for k, v in presence.items() if v[1] > base_log}
             x, P, mu = new_states[j]
             if self.model == "mht":
                 class_probs, cls = self._initial_class(m.detector, m.cls)
