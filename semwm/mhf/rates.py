@@ -153,19 +153,6 @@ class ObservedRates:
         result: FloatArray = near.any(axis=1).astype(float)
         return result
 
-    def _class_rate(
-        self,
-        stream: StreamKey,
-        cls: str,
-        class_rate: float,
-        cache: dict[tuple[str, str, str], float],
-    ) -> float:
-        key = (stream[0], stream[1], cls)
-        g = cache.get(key)
-        if g is None:
-            g = cache[key] = self.rate(stream, cls, class_rate if cls else None)
-        return g
-
     def from_stream(
         self,
         stream: StreamKey,
@@ -176,19 +163,26 @@ class ObservedRates:
     ) -> FloatArray:
         """:math:`f_{s,d}(o)` of each object (Hz) for a detection of ``stream`` at
         ``time``; ``classes``: each object's class (else one count for all)."""
-        cache: dict[tuple[str, str, str], float] = {}
+        clock = self.sources.get(stream[0])
+        if clock is None or not clock.interval:
+            return class_rates  # every g is 0 until the source has scanned twice
         base = np.asarray(class_rates, dtype=float).tolist()
-        g = np.array(
-            [
-                self._class_rate(stream, "" if classes is None else classes[i], base[i], cache)
-                for i in range(len(lineages))
-            ]
-        )
+        by_class: dict[str, float] = {}  # the first object of a class sets its prior
+        values = []
+        for i in range(len(lineages)):
+            cls = "" if classes is None else classes[i]
+            rate = by_class.get(cls)
+            if rate is None:
+                rate = by_class[cls] = self.rate(stream, cls, base[i] if cls else None)
+            values.append(rate)
+        g = np.array(values)
         if not np.any(g > 0.0):
             return class_rates
         window = WINDOW_DETECTIONS / np.where(g > 0.0, g, 1.0)
+        seen = self.seen
+        never: dict[StreamKey, float] = {}
         last = np.fromiter(
-            (self.seen.get(lineage, {}).get(stream, -np.inf) for lineage in lineages),
+            (seen.get(lineage, never).get(stream, -np.inf) for lineage in lineages),
             dtype=float,
             count=len(lineages),
         )
@@ -214,23 +208,29 @@ class ObservedRates:
         base = result.tolist()
         rates: dict[tuple[str, str, str], float] = {}
         done: dict[tuple[int, str, float], float] = {}  # versions of one object share it
+        seen = self.seen
         for i, lineage in enumerate(lineages):
-            entries = self.seen.get(lineage)
+            entries = seen.get(lineage)
             if not entries:
                 continue
             cls = "" if classes is None else classes[i]
-            extra = done.get((lineage, cls, base[i]))
+            rate = base[i]
+            extra = done.get((lineage, cls, rate))
             if extra is None:
                 extra = 0.0
                 for stream, last in entries.items():
-                    g = self._class_rate(stream, cls, base[i], rates)
-                    if g <= base[i]:
+                    key = (stream[0], stream[1], cls)
+                    g = rates.get(key)
+                    if g is None:
+                        g = rates[key] = self.rate(stream, cls, rate if cls else None)
+                    if g <= rate:
                         continue
                     until = last + WINDOW_DETECTIONS / g
                     if until > start:
-                        extra += (g - base[i]) * min((until - start) / span, 1.0)
-                done[(lineage, cls, base[i])] = extra
-            result[i] += extra
+                        extra += (g - rate) * min((until - start) / span, 1.0)
+                done[(lineage, cls, rate)] = extra
+            if extra:
+                result[i] += extra
         return result
 
     def after_scan(
