@@ -52,6 +52,11 @@ GRID_SIZES = (50, 100, 1000)
 QUICK_GRID_SIZES = (50, 100)
 TOP = 12
 CHANGES = (
+    "Near pairs at scale (`semwm/mhf/nearby.py`): above 4,096 pairs, gating a scan and "
+    "grouping the lineages that are one object ask a k-d tree (scipy's cKDTree) for the "
+    "pairs within a widened radius, then apply the exact bound, in the dense test's "
+    "order (was a (D, T, d) and an (N, N, d) difference array per scan). Published "
+    "objects are named tuples.",
     "Updates: one Kalman/IMM update per filter shape ``(M, n)`` for every gated pair of "
     "the scan (was one per class: the equations are the same for every class of one "
     "shape), the class posterior and published class of every pair in one call (was one "
