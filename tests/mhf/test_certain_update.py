@@ -6,21 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from semwm.knowledge.loader import load_knowledge
-from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.mhf.filter import MultipleHypothesisFilter
-from semwm.sim.runner import run_scenario
-from semwm.sim.scenarios import make_scenario
 
-
-def _worlds(name: str, seed: int, **sizes: float) -> list[list[tuple[object, ...]]]:
-    scenario = make_scenario(name, seed, **sizes)
-    knowledge = load_knowledge(shipped_knowledge_path(scenario.knowledge_file))
-    result = run_scenario(scenario, knowledge, progress=False)
-    return [
-        [(o.id, o.cls, tuple(o.position), o.existence, o.label) for o in world.objects]
-        for world in result.worlds
-    ]
+from .worlds import scenario_worlds as _worlds
 
 
 @pytest.mark.parametrize(

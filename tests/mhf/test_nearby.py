@@ -6,11 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semwm.knowledge.loader import load_knowledge
-from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.mhf import nearby
-from semwm.sim.runner import run_scenario
-from semwm.sim.scenarios import make_scenario
+
+from .worlds import scenario_worlds as _worlds
 
 
 def test_within_finds_every_pair_in_the_dense_order() -> None:
@@ -43,16 +41,6 @@ def test_close_pairs_are_each_pair_once_in_the_dense_order() -> None:
     assert np.array_equal(aa[keep], dense_a) and np.array_equal(bb[keep], dense_b)
     assert nearby.close_pairs(points[:1], radius[:1])[0].size == 0
     assert not nearby.usable(np.array([[0.0, np.inf]]))
-
-
-def _worlds(name: str, seed: int, **sizes: float) -> list[list[tuple[object, ...]]]:
-    scenario = make_scenario(name, seed, **sizes)
-    knowledge = load_knowledge(shipped_knowledge_path(scenario.knowledge_file))
-    result = run_scenario(scenario, knowledge, progress=False)
-    return [
-        [(o.id, o.cls, tuple(o.position), o.existence, o.label) for o in world.objects]
-        for world in result.worlds
-    ]
 
 
 @pytest.mark.parametrize(
