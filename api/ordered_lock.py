@@ -47,8 +47,18 @@ class TimeOrderedLock:
                 return
             baton = threading.Lock()
             baton.acquire()
-            heapq.heappush(self._waiting, (key, next(self._arrival), baton))
-        baton.acquire()  # released by release(): the lock is handed over, still held
+            entry = (key, next(self._arrival), baton)
+            heapq.heappush(self._waiting, entry)
+        try:
+            baton.acquire()  # released by release(): the lock is handed over, still held
+        except BaseException:  # interrupted while waiting (a signal in the main thread)
+            with self._guard:
+                if entry in self._waiting:  # not handed over: leave the queue
+                    self._waiting.remove(entry)
+                    heapq.heapify(self._waiting)
+                    raise
+            self.release()  # handed over meanwhile: pass it on
+            raise
 
     def release(self) -> None:
         with self._guard:

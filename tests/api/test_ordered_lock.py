@@ -116,3 +116,40 @@ def test_scans_queued_behind_the_world_lock_are_applied_in_time_order_without_re
     assert results == {"r1": 1, "r2": 1, "r3": 1}
     assert service.model.replayed_scans == 0
     assert service.model.latest_time == pytest.approx(10.3)
+
+
+def test_a_waiter_interrupted_while_waiting_leaves_the_queue(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A signal (KeyboardInterrupt) in a waiting thread must not leave a dead entry that
+    the lock would later be handed to."""
+    lock = TimeOrderedLock()
+    lock.acquire(0.0)
+    real_lock = threading.Lock
+
+    class Interrupted:  # a baton whose second acquire (the wait) is interrupted
+        def __init__(self) -> None:
+            self.inner = real_lock()
+            self.calls = 0
+
+        def acquire(self) -> bool:
+            self.calls += 1
+            if self.calls == 2:
+                raise KeyboardInterrupt
+            return self.inner.acquire()
+
+        def release(self) -> None:
+            self.inner.release()
+
+        def __lt__(self, other: object) -> bool:
+            return False
+
+    monkeypatch.setattr("api.ordered_lock.threading.Lock", Interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        lock.acquire(1.0)
+    monkeypatch.undo()
+    assert lock.waiting == 0  # left the queue
+    lock.release()
+    assert not lock.locked()  # not handed to the dead waiter
+    with lock.ordered(2.0):
+        assert lock.locked()
