@@ -83,10 +83,23 @@ def check(
     """
     d = knowledge.world.dimension
     problems: list[DetectionProblem] = []
-    known_classes = ", ".join(sorted(knowledge.classes))
-    known_detectors = ", ".join(knowledge.detectors)
     measurements: list[Measurement] = []
+    classes, detectors = knowledge.classes, knowledge.detectors
+    default_detector = knowledge.default_detector
     for index, det in enumerate(detections):
+        detector = det.detector if det.detector is not None else default_detector
+        if (  # the common case, nothing to report: no problem list, no closure
+            det.covariance is None
+            and det.cls in classes
+            and detector in detectors
+            and len(det.position) == d
+            and (det.sensor_position is None or len(det.sensor_position) == d)
+        ):
+            if not problems:
+                measurements.append(
+                    _measurement(det, first_seq + index, detector, knowledge, factory)
+                )
+            continue
         found: list[DetectionProblem] = []
 
         def problem(
@@ -95,11 +108,13 @@ def check(
             found.append(DetectionProblem(path=(index, field), message=message))
 
         if det.cls not in knowledge.classes:
+            known_classes = ", ".join(sorted(knowledge.classes))
             problem("class", f"unknown class {det.cls!r}; known classes: {known_classes}")
         if len(det.position) != d:
             problem("position", f"position must have {d} coordinates; found {len(det.position)}")
         detector = det.detector if det.detector is not None else knowledge.default_detector
         if detector not in knowledge.detectors:
+            known_detectors = ", ".join(knowledge.detectors)
             problem(
                 "detector", f"unknown detector {detector!r}; known detectors: {known_detectors}"
             )
@@ -115,32 +130,34 @@ def check(
         if found:
             problems.extend(found)
             continue
-        R = (
-            np.asarray(det.covariance, dtype=float)
-            if det.covariance is not None
-            else factory.measurement_noise(det.cls, detector)
-        )
-        measurements.append(
-            Measurement(
-                seq=first_seq + index,
-                time=det.time,
-                cls=det.cls,
-                z=np.asarray(det.position, dtype=float),
-                R=R,
-                detector=detector,
-                source=det.source,
-                # paper 004: foreign-controlled objects are tracked from observation only
-                label=det.label if knowledge.classes[det.cls].trust_labels else None,
-                clutter_rate=knowledge.detectors[detector].clutter_frequency,
-                sensor=None
-                if det.sensor_position is None
-                else np.asarray(det.sensor_position, dtype=float),
-                time_std=det.time_std or 0.0,
-            )
-        )
+        measurements.append(_measurement(det, first_seq + index, detector, knowledge, factory))
     if problems:
         raise DetectionError(problems)
     return measurements
+
+
+def _measurement(
+    det: Detection, seq: int, detector: str, knowledge: Knowledge, factory: FilterFactory
+) -> Measurement:
+    """A checked detection with its noise and clutter rate resolved."""
+    return Measurement(
+        seq=seq,
+        time=det.time,
+        cls=det.cls,
+        z=np.asarray(det.position, dtype=float),
+        R=np.asarray(det.covariance, dtype=float)
+        if det.covariance is not None
+        else factory.measurement_noise(det.cls, detector),
+        detector=detector,
+        source=det.source,
+        # paper 004: foreign-controlled objects are tracked from observation only
+        label=det.label if knowledge.classes[det.cls].trust_labels else None,
+        clutter_rate=knowledge.detectors[detector].clutter_frequency,
+        sensor=None
+        if det.sensor_position is None
+        else np.asarray(det.sensor_position, dtype=float),
+        time_std=det.time_std or 0.0,
+    )
 
 
 def out_of_range(det: Detection, knowledge: Knowledge, R: np.ndarray | None = None) -> bool:

@@ -210,6 +210,7 @@ class FilterFactory:
     def __init__(self, knowledge: Knowledge) -> None:
         self.knowledge = knowledge
         self._filters: dict[str, ClassFilter] = {}
+        self._noise: dict[tuple[str, str], FloatArray] = {}
 
     @cached_property
     def dim(self) -> int:
@@ -224,13 +225,25 @@ class FilterFactory:
 
     def measurement_noise(self, class_name: str, detector: str) -> FloatArray:
         """R for a class seen by a detector: the detector's per-class noise if it sets one
-        (for the class or its nearest ancestor), else the class's own."""
+        (for the class or its nearest ancestor), else the class's own. Made once per
+        pair and shared by every detection: read-only."""
+        known = self._noise.get((class_name, detector))
+        if known is not None:
+            return known
         spec = self.knowledge.detectors[detector]
         resolved = self.knowledge.classes[class_name]
-        for name in (class_name, *resolved.ancestors):
-            if name in spec.measurement_noise:
-                return np.asarray(spec.measurement_noise[name], dtype=float)
-        return np.asarray(resolved.measurement_noise, dtype=float)
+        noise = next(
+            (
+                spec.measurement_noise[name]
+                for name in (class_name, *resolved.ancestors)
+                if name in spec.measurement_noise
+            ),
+            resolved.measurement_noise,
+        )
+        R = np.array(noise, dtype=float)
+        R.setflags(write=False)
+        self._noise[(class_name, detector)] = R
+        return R
 
 
 def build_class_filter(resolved: ResolvedClass, dim: int) -> ClassFilter:
