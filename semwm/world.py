@@ -68,12 +68,12 @@ class IngestResult:
     ignored: int = 0
 
 
-@dataclass(frozen=True)
-class _Marginal:
+class _Marginal(NamedTuple):
     """What the whole hypothesis set says of one object (lineage) at a time: its
     existence probability (the sum over hypotheses of p(h) times the existence of
     the version h holds, inside the region) and its version in the most probable
-    hypothesis that holds it, with that version's row in the prediction."""
+    hypothesis that holds it, with that version's row in the prediction. A named
+    tuple: one is made per object per scan."""
 
     existence: float
     track: Track
@@ -1011,7 +1011,7 @@ class WorldModel:
             total = min(1.0, math.fsum(marginals[m].existence for m in members))
             for member in members:
                 del result[member]
-            result[best] = replace(marginals[best], existence=total)
+            result[best] = marginals[best]._replace(existence=total)
         return result
 
     def _marginals(self, at: float) -> tuple[dict[int, _Marginal], Predicted]:
