@@ -17,8 +17,6 @@ import heapq
 import itertools
 import math
 import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
 from types import TracebackType
 
 
@@ -31,14 +29,10 @@ class TimeOrderedLock:
         self._waiting: list[tuple[float, int, threading.Lock]] = []
         self._arrival = itertools.count()
 
-    @contextmanager
-    def ordered(self, key: float = -math.inf) -> Iterator[None]:
-        """Hold the lock; if it is taken, wait behind every waiter with a smaller key."""
-        self.acquire(key)
-        try:
-            yield
-        finally:
-            self.release()
+    def ordered(self, key: float = -math.inf) -> _Held:
+        """``with lock.ordered(key):`` hold the lock; if it is taken, wait behind every
+        waiter with a smaller key."""
+        return _Held(self, key)
 
     def acquire(self, key: float = -math.inf) -> None:
         with self._guard:
@@ -89,3 +83,23 @@ class TimeOrderedLock:
         trace: TracebackType | None,
     ) -> None:
         self.release()
+
+
+class _Held:
+    """The context of :meth:`TimeOrderedLock.ordered` (a class: no generator per use)."""
+
+    __slots__ = ("key", "lock")
+
+    def __init__(self, lock: TimeOrderedLock, key: float) -> None:
+        self.lock, self.key = lock, key
+
+    def __enter__(self) -> None:
+        self.lock.acquire(self.key)
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
+        self.lock.release()

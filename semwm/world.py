@@ -654,7 +654,13 @@ class WorldModel:
             log.append(_LoggedScan(key, tuple(scans[key]), before, scan_view, before_book))
         assert state.time is not None
         horizon = state.time - self.reorder_window
-        log = [s for s in log if s.key[0] >= horizon] if self.reorder_window > 0 else []
+        if self.reorder_window > 0:  # the log is in key (time) order: drop its head
+            cut = 0
+            while cut < len(log) and log[cut].key[0] < horizon:
+                cut += 1
+            log = log[cut:] if cut else log
+        else:
+            log = []
         floor = self._replay_floor
         if len(log) > self.max_reorder_scans:
             dropped = len(log) - self.max_reorder_scans
