@@ -73,17 +73,6 @@ class TimeOrderedLock:
         with self._guard:
             return len(self._waiting)
 
-    def __enter__(self) -> None:
-        self.acquire()
-
-    def __exit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        trace: TracebackType | None,
-    ) -> None:
-        self.release()
-
 
 class _Held:
     """The context of :meth:`TimeOrderedLock.ordered` (a class: no generator per use)."""

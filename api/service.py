@@ -229,11 +229,11 @@ class WorldService:
         Listeners run under the lock, so they see changes in the order they were
         committed; one that raises is logged and does not undo the change.
         """
-        with self._lock:
+        with self._lock.ordered():
             self._listeners.append(listener)
 
         def remove() -> None:
-            with self._lock:
+            with self._lock.ordered():
                 if listener in self._listeners:
                     self._listeners.remove(listener)
 
@@ -315,8 +315,8 @@ class WorldService:
             times = [
                 self.sources.to_service_time(source, t)
                 for source, t in stamps
-                if isinstance(t, int | float) and not isinstance(t, bool)
-            ]
+                if isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t)
+            ]  # a time the model will refuse (not a number, infinite) does not jump ahead
         return min(times, default=-math.inf)
 
     def _summarise(self) -> dict[str, Any]:

@@ -54,11 +54,11 @@ def test_waiters_enter_by_smallest_key_not_by_arrival() -> None:
 def test_equal_keys_enter_first_come_and_plain_users_go_first() -> None:
     lock = TimeOrderedLock()
     entered: list[str] = []
-    with lock:
+    with lock.ordered():
         threads = _queue(lock, [("first", 1.0), ("second", 1.0)], entered)
 
         def plain() -> None:
-            with lock:
+            with lock.ordered():
                 entered.append("plain")
 
         reader = threading.Thread(target=plain)
