@@ -27,6 +27,7 @@ tenth of a standard deviation).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import cast
 
 import numpy as np
 
@@ -110,8 +111,12 @@ def _chunks(members: list[Track], gids: list[int]) -> list[tuple[list[Track], li
 def _same_in(
     members: list[Track], gids: np.ndarray, existence: Mapping[int, float], max_distance: float
 ) -> set[tuple[int, int]]:
-    """:func:`_same_pairs` of versions of one state shape, group ids ``gids``."""
+    """:func:`_same_pairs` of versions of one state shape, group ids ``gids``: only the
+    pairs within one group are compared (versions of different lineages never merge)."""
     if len(members) < 2:
+        return set()
+    aa, bb = _pairs_within(gids)
+    if aa.size == 0:
         return set()
     x = np.array([t.x for t in members])  # (V, M, n)
     P = np.array([t.P for t in members])  # (V, M, n, n)
@@ -121,21 +126,56 @@ def _same_in(
     sign, log_det = np.linalg.slogdet(P)  # (V, M)
     valid = np.all(sign > 0, axis=1)
     P_inv = np.linalg.inv(np.where(valid[:, None, None, None], P, np.eye(P.shape[-1])))
-    delta = x[:, None] - x[None, :]  # (a, b, M, n): x_a - x_b
-    d2 = np.einsum("abmi,amij,abmj->abm", delta, P_inv, delta).max(axis=2)
+    delta = x[aa] - x[bb]  # (pairs, M, n): x_a - x_b
+    d2 = np.einsum("pmi,pmij,pmj->pm", delta, P_inv[aa], delta).max(axis=1)
     same = (
-        (gids[:, None] == gids[None, :])
-        & (d2 <= max_distance)
-        & (np.abs(log_det[:, None] - log_det[None, :]).max(axis=2) <= LOG_DET_TOLERANCE)
-        & (np.abs(r[:, None] - r[None, :]) <= PROBABILITY_TOLERANCE)
-        & (np.abs(mu[:, None] - mu[None, :]).max(axis=2) <= PROBABILITY_TOLERANCE)
-        & (np.abs(probs[:, None] - probs[None, :]).max(axis=2) <= PROBABILITY_TOLERANCE)
-        & valid[:, None]
-        & valid[None, :]
+        (d2 <= max_distance)
+        & (np.abs(log_det[aa] - log_det[bb]).max(axis=1) <= LOG_DET_TOLERANCE)
+        & (np.abs(r[aa] - r[bb]) <= PROBABILITY_TOLERANCE)
+        & (np.abs(mu[aa] - mu[bb]).max(axis=1) <= PROBABILITY_TOLERANCE)
+        & (np.abs(probs[aa] - probs[bb]).max(axis=1) <= PROBABILITY_TOLERANCE)
+        & valid[aa]
+        & valid[bb]
     )
-    np.fill_diagonal(same, False)  # a version is trivially itself
     keys = [t.key for t in members]
-    return {(keys[i], keys[j]) for i, j in zip(*np.nonzero(same), strict=True)}
+    return {(keys[i], keys[j]) for i, j in zip(aa[same].tolist(), bb[same].tolist(), strict=True)}
+
+
+def _pairs_within(gids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs ``(a, b)``, ``a != b``, of entries with equal group id, ordered by
+    ``a`` then ``b`` (both directions: the distance test is not symmetric)."""
+    same = gids[:, None] == gids[None, :]
+    np.fill_diagonal(same, False)
+    aa, bb = np.nonzero(same)
+    return aa, bb
+
+
+def _twin_matrix(
+    members: Sequence[Hypothesis], tracks: Mapping[int, Track], same: set[tuple[int, int]]
+) -> list[list[bool]] | None:
+    """For hypotheses holding the same lineages, ``twins[a][b]``: whether every version
+    ``b`` holds is ``a``'s version of that object or the same estimate as it (``(a's
+    key, b's key)`` in ``same``); ``None`` when no hypothesis is a twin of an earlier one
+    (nothing of the group merges)."""
+    lineage_order = sorted(tracks[k].lineage for k in members[0].tracks)
+    column = {lineage: j for j, lineage in enumerate(lineage_order)}
+    keys = np.empty((len(members), len(lineage_order)), dtype=np.int64)
+    for row, h in enumerate(members):
+        for key in h.tracks:
+            keys[row, column[tracks[key].lineage]] = key
+    distinct, local = np.unique(keys, return_inverse=True)
+    local = local.reshape(keys.shape)
+    count = len(distinct)
+    position = {int(key): i for i, key in enumerate(distinct.tolist())}
+    alike = np.eye(count, dtype=bool)  # version -> version: equal, or the same estimate
+    for a, b in same:
+        i, j = position.get(a), position.get(b)
+        if i is not None and j is not None:
+            alike[i, j] = True
+    twins = alike[local[:, None, :], local[None, :, :]].all(axis=2)  # (a, b)
+    if not np.triu(twins, 1).any():
+        return None
+    return cast(list[list[bool]], twins.tolist())
 
 
 def merge_similar(
@@ -169,19 +209,21 @@ def merge_similar(
     weights = [h.log_weight for h in hypotheses]
     absorbed: set[int] = set()
     for members in groups.values():
-        kept: list[tuple[int, dict[int, int]]] = []  # representative, lineage -> key
-        for index in members:  # most probable first
-            versions = {tracks[k].lineage: k for k in hypotheses[index].tracks}
-            for representative, held in kept:
-                if all(
-                    held[lineage] == key or (held[lineage], key) in same
-                    for lineage, key in versions.items()
-                ):
-                    weights[representative] = log_add(weights[representative], weights[index])
+        if len(members) < 2:
+            continue
+        twins = _twin_matrix([hypotheses[i] for i in members], tracks, same)
+        if twins is None:
+            continue
+        kept: list[int] = []  # positions in members of the representatives so far
+        for position, index in enumerate(members):  # most probable first
+            for representative in kept:
+                if twins[representative][position]:
+                    target = members[representative]
+                    weights[target] = log_add(weights[target], weights[index])
                     absorbed.add(index)
                     break
             else:
-                kept.append((index, versions))
+                kept.append(position)
     if not absorbed:
         return tuple(hypotheses)
     result = [

@@ -101,3 +101,61 @@ def test_the_batched_pairs_agree_with_the_pairwise_definition(
     assert len(pairwise) > 0  # some twins to find
     monkeypatch.setattr(similar, "_MAX_BATCH", 4)  # batches of whole groups
     assert similar._same_pairs(lineages, existence, 0.01) == pairwise
+
+
+def _merge_by_definition(
+    hypotheses: tuple[Hypothesis, ...], tracks: dict[int, Track], max_distance: float
+) -> list[tuple[frozenset[int], float]]:
+    """The module's rule written out pairwise: each hypothesis (most probable first)
+    joins the first earlier kept one with the same objects whose every version is its
+    own or the same estimate; probabilities add."""
+    kept: list[tuple[frozenset[int], dict[int, int]]] = []  # tracks, lineage -> key
+    probability: list[float] = []
+    for h in hypotheses:
+        versions = {tracks[k].lineage: k for k in h.tracks}
+        for i, (_, held) in enumerate(kept):
+            if set(held) == set(versions) and all(
+                held[lineage] == key
+                or same_estimate(tracks[held[lineage]], tracks[key], 1.0, 1.0, max_distance)
+                for lineage, key in versions.items()
+            ):
+                probability[i] += math.exp(h.log_weight)
+                break
+        else:
+            kept.append((h.tracks, versions))
+            probability.append(math.exp(h.log_weight))
+    result = [(held_tracks, p) for (held_tracks, _), p in zip(kept, probability, strict=True)]
+    return sorted(result, key=lambda e: -e[1])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_merging_many_hypotheses_follows_the_definition(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    # 4 objects with 6 versions each, some twins of one another, some not; 0.0101 apart
+    # with variances 0.01 and 0.0105 is a twin seen from one version, not the other
+    tracks = {
+        10 * lineage + v: version(
+            10 * lineage + v,
+            lineage,
+            float(rng.choice([0.0, 0.004, 0.0101, 0.3])),
+            variance=float(rng.choice([0.01, 0.0105])),
+        )
+        for lineage in range(4)
+        for v in range(6)
+    }
+    hypotheses = []
+    for _ in range(40):
+        held = rng.choice(4, size=int(rng.integers(2, 5)), replace=False)
+        keys = frozenset(int(10 * lineage + rng.integers(6)) for lineage in held)
+        hypotheses.append(Hypothesis(float(rng.normal()), keys, 2.0))
+    weights = np.array([h.log_weight for h in hypotheses])
+    total = np.log(np.exp(weights).sum())
+    ordered = tuple(
+        Hypothesis(h.log_weight - total, h.tracks, h.rate)
+        for h in sorted(hypotheses, key=lambda h: -h.log_weight)
+    )
+    merged = merge_similar(ordered, tracks, {}, 0.01)
+    expected = _merge_by_definition(ordered, tracks, 0.01)
+    assert [h.tracks for h in merged] == [tracks_ for tracks_, _ in expected]
+    assert [math.exp(h.log_weight) for h in merged] == pytest.approx([p for _, p in expected])
+    assert len(merged) < len(ordered)  # some twins merged
