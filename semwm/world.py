@@ -14,9 +14,11 @@ changes nothing.
 from __future__ import annotations
 
 import math
+from bisect import bisect_left
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
+from operator import attrgetter
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -87,6 +89,9 @@ class _LoggedScan:
     before: MHFState
     view: SensorView | None = None
     book: ConfidenceBook = field(default_factory=ConfidenceBook)
+
+
+_log_key = attrgetter("key")
 
 
 @dataclass(frozen=True)
@@ -636,7 +641,13 @@ class WorldModel:
     ) -> tuple[MHFState, list[_LoggedScan], ConfidenceBook, _Floor | None]:
         """:meth:`_process` of scans grouped by key (``scans`` not empty; changed here)."""
         first = min(scans)
-        start = next((i for i, s in enumerate(self._log) if s.key >= first), len(self._log))
+        # the first logged scan at or after ``first`` (the log is in key order; a new
+        # scan usually comes after all of it)
+        history = self._log
+        if not history or history[-1].key < first:
+            start = len(history)
+        else:
+            start = bisect_left(history, first, key=_log_key)
         self.replayed_scans += len(self._log) - start
         if start < len(self._log):
             state, book = self._log[start].before, self._log[start].book
