@@ -955,19 +955,24 @@ class WorldModel:
     ) -> dict[int, _Marginal]:
         """One entry per physical object: lineages that are the same object in different
         hypotheses (their estimates nearly coincide, their classes are compatible, and
-        the most probable hypothesis does not hold both) are one object, whose existence
-        is the sum of theirs (at most 1), shown as the lineage published now (stable
-        ids), else the most likely one.
+        the most probable hypothesis does not hold both as shown) are one object, whose
+        existence is the sum of theirs (at most 1), shown as the lineage published now
+        (stable ids), else the most likely one.
 
         Hypotheses that agree an object exists but not on which detection started it
         hold it under different lineages; without this, a 50/50 disagreement about
-        identity would read as two objects of existence 0.5 each.
+        identity would read as two objects of existence 0.5 each. Two lineages count as
+        two objects only when each is shown in its version of the most probable
+        hypothesis: one shown in another hypothesis's version (its own in the best one
+        is leaving) may be the very object the best one calls by the other lineage
+        (people who swapped lineages when they passed close by).
         """
         candidates = [lineage for lineage, m in marginals.items() if m.existence >= _GROUPING_FLOOR]
         if len(candidates) < 2:
             return marginals
         state = self._state
-        together = {state.tracks[k].lineage for k in state.best.tracks}
+        best_keys = state.best.tracks
+        together = {lineage for lineage in candidates if marginals[lineage].track.key in best_keys}
         parent = {lineage: lineage for lineage in candidates}
 
         def root(lineage: int) -> int:
@@ -1017,11 +1022,13 @@ class WorldModel:
         for members in groups.values():
             if len(members) == 1:
                 continue
-            # shown as the member that already has an id (stable ids), else the likeliest
+            # shown as a member that already has an id (stable ids), one shown in its
+            # version of the most probable hypothesis first (not one that is there only
+            # by another hypothesis's account), else the likeliest
             shown = {p.lineage for p in self._published.values()}
             with_id = [m for m in members if m in shown]
             best = (
-                min(with_id, key=lambda m: self._ids.get(m, 0))
+                min(with_id, key=lambda m: (m not in together, self._ids.get(m, 0)))
                 if with_id
                 else max(members, key=lambda m: (marginals[m].existence, -m))
             )
