@@ -157,23 +157,33 @@ class WorldFeed:
 
     def on_change(self, change: WorldChange) -> None:
         now = time.monotonic()
+        watched = bool(self._subscribers or self._consumers)
         with self._lock:
+            if change.kind == "detections":
+                self._applied.append((now, change.applied))
+                self._trim(now)
+            if not watched:
+                # nobody to tell: no snapshot to build, and no wake-up of the event loop
+                # (its thread would take the interpreter lock from the one applying
+                # scans); the next subscriber starts from a fresh world
+                self._pending = _Pending()
+                self._last_world = None
+                return
             pending = self._pending
             pending.dirty = True
             pending.changes.add(change.kind)
             if change.kind == "detections":
-                # the views are built when a snapshot is published (nothing while nobody watches)
+                # the views are built when a snapshot is published
                 pending.detections.extend(change.detections)
-                self._applied.append((now, change.applied))
-                self._trim(now)
             elif change.kind == "knowledge":
                 pending.knowledge = True
         self._poke()
 
     def _poke(self) -> None:
-        if self._loop is not None and self._wake is not None:
+        wake = self._wake
+        if self._loop is not None and wake is not None and not wake.is_set():
             with contextlib.suppress(RuntimeError):  # the loop is closed: nobody to tell
-                self._loop.call_soon_threadsafe(self._wake.set)
+                self._loop.call_soon_threadsafe(wake.set)
 
     # -- subscribers --------------------------------------------------------------------------
 

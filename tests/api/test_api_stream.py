@@ -162,3 +162,39 @@ def test_a_lagging_subscriber_keeps_the_latest_frames(service: WorldService) -> 
     frames = asyncio.run(run())
     assert len(frames) == 2
     assert frames[-1] is not None and '"time":0.4' in frames[-1]
+
+
+def test_changes_nobody_watches_wake_nothing_and_a_late_subscriber_sees_them(
+    service: WorldService,
+) -> None:
+    async def run() -> tuple[int, dict[str, Any], float]:
+        feed = WorldFeed(service, interval=0.0, keepalive=60.0, queue_size=8)
+        await feed.start()
+        try:
+            async with feed.subscribe() as queue:  # a first viewer, then gone
+                await queue.get()  # knowledge
+                await queue.get()  # initial world
+            wakes = 0
+            real_set = feed._wake.set  # type: ignore[union-attr]
+
+            def counted() -> None:
+                nonlocal wakes
+                wakes += 1
+                real_set()
+
+            feed._wake.set = counted  # type: ignore[method-assign,union-attr]
+            for k in range(5):
+                await asyncio.to_thread(service.ingest, scene(k * 0.1), True)
+            await asyncio.sleep(0.05)
+            async with feed.subscribe() as queue:
+                await queue.get()  # knowledge
+                frame = await asyncio.wait_for(queue.get(), TIMEOUT)
+                assert frame is not None
+                return wakes, json.loads(frame.split("data: ", 1)[1]), feed.rate()
+        finally:
+            await feed.stop()
+
+    wakes, world, rate = asyncio.run(run())
+    assert wakes == 0  # five batches and nobody watching: the event loop slept on
+    assert world["time"] == pytest.approx(0.4)  # the newcomer starts from the world now
+    assert rate > 0.0  # the ingest rate still counts them
