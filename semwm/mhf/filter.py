@@ -197,6 +197,9 @@ class MultipleHypothesisFilter:
                     start,
                     end,
                     [t.cls for t in predicted.tracks],
+                    [t.last_seen <= t.created for t in predicted.tracks],
+                    predicted.position,
+                    self.sensor_reach,
                 )
         return mu, f * inside
 
@@ -354,8 +357,11 @@ class MultipleHypothesisFilter:
         lineages = [t.lineage for t in predicted.tracks]
         base = self.class_rates(predicted.tracks)
         classes = [t.cls for t in predicted.tracks]
+        unconfirmed = [t.last_seen <= t.created for t in predicted.tracks]
         return {
-            detector: observed.from_stream((source, detector), lineages, base, time, classes)
+            detector: observed.from_stream(
+                (source, detector), lineages, base, time, classes, unconfirmed
+            )
             for detector in {m.detector for m in measurements}
         }
 
@@ -369,7 +375,8 @@ class MultipleHypothesisFilter:
         time: float,
     ) -> ObservedRates:
         """The observed rates after the scan: per detector, which objects its detections
-        updated or started in the most probable hypothesis (:mod:`semwm.mhf.rates`)."""
+        updated or started in the most probable hypothesis (:mod:`semwm.mhf.rates`), and
+        which it started in the others (they see those too, but do not count them)."""
         detector_of: dict[int, str] = {}
         for option in options:
             detector = option.measurement.detector
@@ -379,22 +386,31 @@ class MultipleHypothesisFilter:
         existed = {t.lineage for t in before.values()}
         detected: dict[str, list[int]] = {}
         born: dict[str, list[int]] = {}
+        born_elsewhere: dict[str, list[int]] = {}
         alive: set[int] = set()
         classes: dict[int, str] = {}
         for cluster in final:
             for key in cluster.keys:
                 alive.add(table.tracks[key].lineage)
-            for key in cluster.hypotheses[0].tracks & table.fresh:
+            best = cluster.hypotheses[0].tracks
+            for key in best & table.fresh:
                 lineage = table.tracks[key].lineage
                 by = detector_of.get(lineage)
                 if by is not None:
                     target = detected if lineage in existed else born
                     target.setdefault(by, []).append(lineage)
                     classes[lineage] = table.tracks[key].cls
+            for key in (cluster.keys - best) & table.fresh:
+                lineage = table.tracks[key].lineage
+                by = detector_of.get(lineage)
+                if by is not None and lineage not in existed:
+                    born_elsewhere.setdefault(by, []).append(lineage)
         first = options[0].measurement if options else None
         source = (first.source or "") if first is not None else ""
         sensor = None if first is None or first.sensor is None else tuple(first.sensor.tolist())
-        return observed.after_scan(source, time, detected, born, alive, sensor, classes)
+        return observed.after_scan(
+            source, time, detected, born, alive, sensor, classes, born_elsewhere
+        )
 
     def undetected(
         self,

@@ -27,7 +27,12 @@ object look missed at the frequent classes' rate and drop it before its next
 detection. A stream
 *sees* an object while its last detection of it is at most
 ``WINDOW_DETECTIONS / g`` old (a few expected detection intervals: an object that
-leaves its view stops counting soon after). With the class rate :math:`f_c`:
+leaves its view stops counting soon after). An object that has had no detection but
+the one that started it (in any hypothesis) is seen by the stream that started it
+for as long as that source keeps scanning within its sensor's reach: reported once
+and never again where the stream keeps looking, it is most likely the stream's
+false alarm, and it goes at the stream's rate rather than lingering for seconds at
+the class's. With the class rate :math:`f_c`:
 
 .. math::
    f_{s,d}(o) = \max(f_c, g_{s,d}) \text{ if } (s, d) \text{ sees } o, \text{ else } f_c
@@ -105,7 +110,8 @@ class ObservedRates:
     """What the sources' streams say about detection rates; immutable, one per state.
 
     ``streams``: per ``(source, detector, class)``, its counts; ``seen``: lineage ->
-    stream -> time of the stream's last detection of it.
+    stream -> time of the stream's last detection of it (in the most probable
+    hypothesis), or of the detection with which it started it (in any hypothesis).
     """
 
     sources: Mapping[str, SourceClock] = field(default_factory=dict)
@@ -160,9 +166,12 @@ class ObservedRates:
         class_rates: FloatArray,
         time: float,
         classes: Sequence[str] | None = None,
+        unconfirmed: Sequence[bool] | None = None,
     ) -> FloatArray:
         """:math:`f_{s,d}(o)` of each object (Hz) for a detection of ``stream`` at
-        ``time``; ``classes``: each object's class (else one count for all)."""
+        ``time``; ``classes``: each object's class (else one count for all);
+        ``unconfirmed``: objects with no detection but the one that started them (the
+        stream that started one sees it while it scans, see :meth:`over`)."""
         clock = self.sources.get(stream[0])
         if clock is None or not clock.interval:
             return class_rates  # every g is 0 until the source has scanned twice
@@ -186,7 +195,10 @@ class ObservedRates:
             dtype=float,
             count=len(lineages),
         )
-        sees = (g > 0.0) & (time - last <= window)
+        recent = time - last <= window
+        if unconfirmed is not None:
+            recent |= np.asarray(unconfirmed, dtype=bool) & (last > -np.inf)
+        sees = (g > 0.0) & recent
         result: FloatArray = np.where(sees, np.maximum(class_rates, g), class_rates)
         return result
 
@@ -197,17 +209,28 @@ class ObservedRates:
         start: float,
         end: float,
         classes: Sequence[str] | None = None,
+        unconfirmed: Sequence[bool] | None = None,
+        positions: FloatArray | None = None,
+        reach: float | None = None,
     ) -> FloatArray:
         """:math:`f(o)` of each object averaged over ``[start, end]`` (Hz): a stream
         counts for the part of the interval in which it still sees the object.
-        ``classes``: each object's class (else one count for all)."""
+        ``classes``: each object's class (else one count for all).
+
+        ``unconfirmed``: objects that have had no detection but the one that started
+        them. The stream that started one sees it for as long as its source keeps
+        scanning and the object is within ``reach`` (m) of the source's sensor
+        (``positions``: the objects' ``(N, d)``; unknown reach or sensor position:
+        anywhere), not only for the window: an object that it reported once and never
+        again where it keeps looking is most likely its false alarm (a team's 4-sigma
+        outlier), and would otherwise fade at the class's rate for seconds."""
         result = np.array(class_rates, dtype=float, copy=True)
         span = end - start
         if not self.seen or span <= 0.0:
             return result
         base = result.tolist()
         rates: dict[tuple[str, str, str], float] = {}
-        done: dict[tuple[int, str, float], float] = {}  # versions of one object share it
+        done: dict[tuple[int, str, float, bool], float] = {}  # versions of one object share it
         seen = self.seen
         for i, lineage in enumerate(lineages):
             entries = seen.get(lineage)
@@ -215,7 +238,8 @@ class ObservedRates:
                 continue
             cls = "" if classes is None else classes[i]
             rate = base[i]
-            extra = done.get((lineage, cls, rate))
+            single = unconfirmed is not None and bool(unconfirmed[i])
+            extra = done.get((lineage, cls, rate, single))
             if extra is None:
                 extra = 0.0
                 for stream, last in entries.items():
@@ -226,12 +250,34 @@ class ObservedRates:
                     if g <= rate:
                         continue
                     until = last + WINDOW_DETECTIONS / g
+                    if single and self._in_reach(stream[0], positions, i, reach):
+                        until = max(until, self.scanning_until(stream[0]))
                     if until > start:
                         extra += (g - rate) * min((until - start) / span, 1.0)
-                done[(lineage, cls, rate)] = extra
+                done[(lineage, cls, rate, single)] = extra
             if extra:
                 result[i] += extra
         return result
+
+    def _in_reach(
+        self, source: str, positions: FloatArray | None, row: int, reach: float | None
+    ) -> bool:
+        """Whether object ``row`` (of ``positions``) is within ``reach`` of ``source``'s
+        sensor as it last scanned (true when either is unknown)."""
+        clock = self.sources.get(source)
+        if reach is None or positions is None or clock is None or clock.position is None:
+            return True
+        at = np.asarray(clock.position[: positions.shape[1]], dtype=float)
+        offset = positions[row, : at.shape[0]] - at
+        return float(offset @ offset) <= reach * reach
+
+    def scanning_until(self, source: str) -> float:
+        """Until when ``source`` counts as scanning: :data:`STALE_INTERVALS` of its mean
+        intervals after its last scan (``-inf`` before its second scan)."""
+        clock = self.sources.get(source)
+        if clock is None or not clock.interval:
+            return -np.inf
+        return clock.last_time + STALE_INTERVALS * clock.interval
 
     def after_scan(
         self,
@@ -242,6 +288,7 @@ class ObservedRates:
         alive: frozenset[int] | set[int],
         position: tuple[float, ...] | None = None,
         classes: Mapping[int, str] | None = None,
+        born_elsewhere: Mapping[str, Iterable[int]] | None = None,
     ) -> ObservedRates:
         """The rates after one scan of ``source`` at ``time``.
 
@@ -250,7 +297,12 @@ class ObservedRates:
         per detector, the new lineages it started; ``alive``: every lineage the state
         holds after the scan; ``position``: where the source's sensor was;
         ``classes``: the class of each lineage detected or started (counts are kept
-        per class; without it, one count for all).
+        per class; without it, one count for all); ``born_elsewhere``: per detector,
+        new lineages it started in other hypotheses than the most probable one (the
+        stream sees them, but they are not counted: the counts follow the most
+        probable account of what it detects). A lineage that only such a hypothesis
+        holds (an outlier that the best one calls clutter) would otherwise be seen by
+        no stream and fade at the class's rate for seconds.
         """
         sources = dict(self.sources)
         clock = sources.get(source)
@@ -291,9 +343,14 @@ class ObservedRates:
                 now | started,
             )
         seen = {lineage: streams_ for lineage, streams_ in self.seen.items() if lineage in alive}
-        for detector in set(detected) | set(born):
+        elsewhere = born_elsewhere or {}
+        for detector in set(detected) | set(born) | set(elsewhere):
             stream: StreamKey = (source, detector)
-            for lineage in (*detected.get(detector, ()), *born.get(detector, ())):
+            for lineage in (
+                *detected.get(detector, ()),
+                *born.get(detector, ()),
+                *elsewhere.get(detector, ()),
+            ):
                 if lineage in alive:
                     seen[lineage] = {**seen.get(lineage, {}), stream: time}
         return ObservedRates(sources, streams, seen)
