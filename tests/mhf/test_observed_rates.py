@@ -3,6 +3,8 @@ a team reporting far faster than the knowledge's rate."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -75,10 +77,20 @@ def test_lineages_that_are_gone_are_forgotten() -> None:
     assert set(rates.seen) == {1}
 
 
-def team_stream(observed: bool, until: float) -> tuple[WorldModel, list[int]]:
+def _add_duplicate(detections: list[dict[str, object]]) -> None:
+    detections.append({"time": detections[0]["time"], "class": "Cup", "position": [1.0, 1.3],
+                       "source": "robot0"})  # fmt: skip
+
+
+def team_stream(
+    observed: bool,
+    until: float,
+    at_duplicate_tick: Callable[[list[dict[str, object]]], None] = _add_duplicate,
+) -> tuple[WorldModel, list[int]]:
     """Five robots at 30 Hz on four cups 0.7 m apart (5 cm noise); at t = 1 s robot0
-    also reports a cup 0.3 m from the first one, outside its gate: a duplicate.
-    Returns the model and the stored hypothesis count after each frame from t = 1 s."""
+    also reports a cup 0.3 m from the first one, outside its gate: a duplicate
+    (``at_duplicate_tick`` changes robot0's scan then otherwise). Returns the model
+    and the stored hypothesis count after each frame from t = 1 s."""
     wm = WorldModel(knowledge_from_text(KNOWLEDGE % str(observed).lower(), "yaml"))
     rng = np.random.default_rng(1)
     counts = []
@@ -95,9 +107,7 @@ def team_stream(observed: bool, until: float) -> tuple[WorldModel, list[int]]:
                 for xy in CUPS
             ]
             if tick == DUPLICATE_TICK and robot == 0:
-                detections.append(
-                    {"time": t, "class": "Cup", "position": [1.0, 1.3], "source": "robot0"}
-                )
+                at_duplicate_tick(detections)
             wm.ingest(detections)
         if tick >= DUPLICATE_TICK:
             counts.append(wm.hypothesis_count)
@@ -262,26 +272,10 @@ def test_an_outlier_that_only_a_less_likely_hypothesis_calls_an_object_is_soon_g
     and scan while it lived: a third of a team's stored versions)."""
     outlier = (1.0, 1.2)  # 4 sigma (5 cm) from the cup at (1, 1), inside its gate
 
-    def run(until: float) -> WorldModel:
-        wm = WorldModel(knowledge_from_text(KNOWLEDGE % "true", "yaml"))
-        rng = np.random.default_rng(1)
-        for tick in range(round(until * 30) + 1):
-            t = tick / 30
-            for robot in range(5):
-                detections = [
-                    {
-                        "time": t + 0.001 * robot,
-                        "class": "Cup",
-                        "position": (np.array(xy) + rng.normal(0.0, 0.05, 2)).tolist(),
-                        "source": f"robot{robot}",
-                    }
-                    for xy in CUPS
-                ]
-                if tick == DUPLICATE_TICK and robot == 0:
-                    detections[0]["position"] = list(outlier)  # instead of the cup
-                wm.ingest(detections)
-        return wm
+    def replace_the_first_cup(detections: list[dict[str, object]]) -> None:
+        detections[0]["position"] = list(outlier)
 
-    started = _outlier_versions(run(1.0), outlier)
+    started = _outlier_versions(team_stream(True, 1.0, replace_the_first_cup)[0], outlier)
     assert started and max(started) < 0.5  # kept, unpublished, by some hypothesis
-    assert _outlier_versions(run(1.4), outlier) == []  # gone 0.4 s later
+    later = team_stream(True, 1.4, replace_the_first_cup)[0]
+    assert _outlier_versions(later, outlier) == []  # gone 0.4 s later
