@@ -73,6 +73,11 @@ CHANGES = (
     "generator steps in 8 s of RoboCup).",
     "Reorder log: where a scan goes found by bisection, and not at all when it comes after "
     "the whole log (was a generator over the log per ingest).",
+    "Ghost lineages (`semwm/mhf/rates.py`): the stream that started a lineage in any "
+    "hypothesis sees it, and one with no detection but its first is seen by that stream "
+    "while it scans within reach: a team's outliers go within a few scans instead of "
+    "fading at the class's rate for seconds (stored versions of the team stream 40 -> 26; "
+    "worlds change, quality over 20 seeds in `quality.md`).",
     "Rates and removal: the observed rate of an object computed once for all its versions; "
     "leave rates looked up per class with the relations only where a class has any; "
     "objects leaving (P_max, time unseen, existence, removed class) decided with arrays "
