@@ -197,7 +197,7 @@ class MultipleHypothesisFilter:
                     start,
                     end,
                     [t.cls for t in predicted.tracks],
-                    [t.last_seen <= t.created for t in predicted.tracks],
+                    _unconfirmed(predicted.tracks),
                     predicted.position,
                     self.sensor_reach,
                 )
@@ -357,7 +357,7 @@ class MultipleHypothesisFilter:
         lineages = [t.lineage for t in predicted.tracks]
         base = self.class_rates(predicted.tracks)
         classes = [t.cls for t in predicted.tracks]
-        unconfirmed = [t.last_seen <= t.created for t in predicted.tracks]
+        unconfirmed = _unconfirmed(predicted.tracks)
         return {
             detector: observed.from_stream(
                 (source, detector), lineages, base, time, classes, unconfirmed
@@ -724,3 +724,8 @@ def _without(
         else:
             children.append((h.tracks, h.log_weight, h.rate))
     return prune(merge(children), 0.0, len(children))
+
+
+def _unconfirmed(tracks: Sequence[Track]) -> list[bool]:
+    """Per version: no detection since the one that started it."""
+    return [t.last_seen <= t.created for t in tracks]

@@ -230,7 +230,7 @@ class ObservedRates:
             return result
         base = result.tolist()
         rates: dict[tuple[str, str, str], float] = {}
-        done: dict[tuple[int, str, float, bool], float] = {}  # versions of one object share it
+        done: dict[tuple[int, str, float], float] = {}
         seen = self.seen
         for i, lineage in enumerate(lineages):
             entries = seen.get(lineage)
@@ -239,7 +239,9 @@ class ObservedRates:
             cls = "" if classes is None else classes[i]
             rate = base[i]
             single = unconfirmed is not None and bool(unconfirmed[i])
-            extra = done.get((lineage, cls, rate, single))
+            # versions of one object share it; not an unconfirmed one, whose reach is
+            # judged from its own position
+            extra = None if single else done.get((lineage, cls, rate))
             if extra is None:
                 extra = 0.0
                 for stream, last in entries.items():
@@ -254,7 +256,8 @@ class ObservedRates:
                         until = max(until, self.scanning_until(stream[0]))
                     if until > start:
                         extra += (g - rate) * min((until - start) / span, 1.0)
-                done[(lineage, cls, rate, single)] = extra
+                if not single:
+                    done[(lineage, cls, rate)] = extra
             if extra:
                 result[i] += extra
         return result
