@@ -132,12 +132,32 @@ class ClassFilter:
         Q = C[0] + t * (C[1] + t * (C[2] + t * C[3]))
         return F, Q
 
+    @cached_property
+    def _random_walk(self) -> tuple[FloatArray, FloatArray] | None:
+        """``(C0, C1)`` when the filter is one mode with ``F(dt) = I`` and
+        ``Q(dt) = C0 + dt C1`` (a zeroth-order Kalman filter), else ``None``."""
+        if self.modes != 1:
+            return None
+        F0, F1, C = self._model_coefficients
+        identity = np.eye(self.state_size)
+        if np.any(F1 != 0.0) or np.any(F0[0] != identity) or np.any(C[2:] != 0.0):
+            return None
+        return C[0], C[1]
+
     def predict(
         self, x: FloatArray, P: FloatArray, mu: FloatArray, dt: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Predict each object by its own ``dt`` (s). Objects with ``dt <= 0`` are left as
         they are: no time passes, so no mode transition either."""
         moving = dt > 0.0
+        walk = self._random_walk
+        if walk is not None:
+            # zeroth order, one mode: x- = x, P- = P + Q(dt) (the general equations with
+            # F = I, without their matrix products)
+            C0, C1 = walk
+            steps = np.where(moving, dt, 0.0)[:, None, None, None]
+            Q = np.where(moving[:, None, None, None], C0 + steps * C1, 0.0)
+            return x.copy(), P + Q, mu.copy()
         if self.velocity_decay > 0.0 and self.state_size > self.dim:
             return self._predict_decaying(x, P, mu, dt, moving)
         if moving.all():

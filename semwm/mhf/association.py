@@ -344,8 +344,9 @@ class Associator:
                     np.trace(predicted.position_covariance, axis1=1, axis2=2)[None, :]
                     + np.trace(R, axis1=1, axis2=2)[:, None]
                 )
-                time_var = np.array([m.time_std * m.time_std for m in measurements])
-                if np.any(time_var > 0.0):  # trace(sigma_t^2 v v^T) = sigma_t^2 |v|^2
+                if any(m.time_std > 0.0 for m in measurements):
+                    # trace(sigma_t^2 v v^T) = sigma_t^2 |v|^2
+                    time_var = np.array([m.time_std * m.time_std for m in measurements])
                     speed2 = (predicted.velocity(self.dim) ** 2).sum(-1)
                     bound = bound + self.gate * time_var[:, None] * speed2[None, :]
                 candidate &= (diff * diff).sum(-1) <= bound
@@ -492,9 +493,9 @@ class Associator:
 
         ``0.0`` when no detection has a time uncertainty.
         """
-        sigma2 = np.array([m.time_std * m.time_std for m in measurements])
-        if not np.any(sigma2 > 0.0):
+        if not any(m.time_std > 0.0 for m in measurements):
             return 0.0
+        sigma2 = np.array([m.time_std * m.time_std for m in measurements])
         v = predicted.velocity(self.dim)[ii]
         noise: FloatArray = sigma2[jj][:, None, None] * v[:, :, None] * v[:, None, :]
         return noise

@@ -52,3 +52,32 @@ def test_class_filter_dt_zero_and_negative_change_nothing() -> None:
         np.testing.assert_array_equal(mu2[i], mu[i])
     np.testing.assert_allclose(mu2[1], mu[1] @ s.T, rtol=1e-14)
     assert not np.allclose(P2[1], P[1])
+
+
+def test_zeroth_order_kalman_prediction_equals_the_general_equations() -> None:
+    """A one-mode zeroth-order filter predicts without matrix products (x- = x,
+    P- = P + Q(dt)); the result is exactly the general IMM prediction's with
+    F = I, and objects with dt <= 0 are left as they are."""
+    for d in (2, 3):
+        s = make_scenario(np.random.default_rng(30 + d), "kf0", d)
+        cf = class_filter(s)
+        assert cf._random_walk is not None
+        rng = np.random.default_rng(31)
+        x, P, mu = cf.initial_states(rng.normal(size=(4, d)))
+        x, P, mu, _ = cf.update(x, P, mu, rng.normal(size=(4, d)), np.stack([s.R] * 4))
+        dt = np.array([0.0, 0.3, -1.0, 0.1])
+        x2, P2, mu2 = cf.predict(x, P, mu, dt)
+        moving = dt > 0.0
+        F, Q = cf.models(dt[moving])
+        x_ref, P_ref, mu_ref = batched.predict(
+            x[moving], P[moving], mu[moving], F, Q, cf.transitions(dt[moving])
+        )
+        np.testing.assert_array_equal(x2[moving], x_ref)
+        np.testing.assert_array_equal(P2[moving], P_ref)
+        np.testing.assert_array_equal(mu2[moving], mu_ref)
+        np.testing.assert_array_equal(x2[~moving], x[~moving])
+        np.testing.assert_array_equal(P2[~moving], P[~moving])
+    imm = class_filter(make_scenario(np.random.default_rng(33), "imm", 2))
+    assert imm._random_walk is None
+    first = class_filter(make_scenario(np.random.default_rng(34), "kf1", 2))
+    assert first._random_walk is None
