@@ -970,9 +970,6 @@ class WorldModel:
         candidates = [lineage for lineage, m in marginals.items() if m.existence >= _GROUPING_FLOOR]
         if len(candidates) < 2:
             return marginals
-        state = self._state
-        best_keys = state.best.tracks
-        together = {lineage for lineage in candidates if marginals[lineage].track.key in best_keys}
         parent = {lineage: lineage for lineage in candidates}
 
         def root(lineage: int) -> int:
@@ -1004,8 +1001,14 @@ class WorldModel:
             upper = aa < bb  # each pair once
             aa, bb = aa[upper], bb[upper]
             pair_delta = delta[aa, bb]
+        if aa.size == 0:
+            return marginals  # no two estimates near each other: each is one object
         d2 = mahalanobis_squared(pair_delta, P[aa] + P[bb])
         close = d2 <= _SAME_OBJECT_GATE
+        if not close.any():
+            return marginals
+        best_keys = self._state.best.tracks
+        together = {lineage for lineage in candidates if marginals[lineage].track.key in best_keys}
         for a, b in zip(aa[close].tolist(), bb[close].tolist(), strict=True):
             first, second = candidates[int(a)], candidates[int(b)]
             if first in together and second in together:
