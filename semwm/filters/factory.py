@@ -69,11 +69,11 @@ class ClassFilter:
         K = z.shape[0]
         x = np.zeros((K, self.modes, self.state_size))
         x[:, :, : self.dim] = z[:, None, :]
-        P = np.broadcast_to(
-            self.initial_covariance, (K, self.modes, *self.initial_covariance.shape)
-        )
-        mu = np.broadcast_to(self.initial_mode_probabilities, (K, self.modes))
-        return x, P.copy(), mu.copy()
+        P = np.empty((K, self.modes, *self.initial_covariance.shape))
+        P[...] = self.initial_covariance
+        mu = np.empty((K, self.modes))
+        mu[...] = self.initial_mode_probabilities
+        return x, P, mu
 
     @cached_property
     def _transition_eigen(self) -> tuple[FloatArray, FloatArray, FloatArray]:
