@@ -86,6 +86,12 @@ CHANGES = (
     "`object.__setattr__`: 2.2 µs against 0.4 µs per version), `Hypothesis` and `Cluster` "
     "named tuples. World: stored positions of one-mode versions without a mixture, "
     "same-object pairs without `np.triu`.",
+    "Zeroth-order Kalman filters predict as x- = x, P- = P + Q(dt) (the general "
+    "equations' result with F = I, bit for bit, without their matrix products: 57 -> 9 µs "
+    "for 10 static objects); new objects' initial covariances filled in place (was "
+    "`np.broadcast_to` and a copy); `DetectionOptions` a named tuple; the time-uncertainty "
+    "terms of gating built only when a detection has one; grouping the lineages that are "
+    "one object stops when no two estimates are near each other.",
 )
 
 
