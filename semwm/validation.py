@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -177,11 +178,17 @@ def out_of_range(det: Detection, knowledge: Knowledge, R: np.ndarray | None = No
     if detector.range is None or det.sensor_position is None:
         return False
     offset = np.asarray(det.position, dtype=float) - np.asarray(det.sensor_position, dtype=float)
-    distance = float(np.linalg.norm(offset))
+    distance = math.sqrt(float(offset @ offset))  # what np.linalg.norm computes
     margin = 0.0
     p = knowledge.world.gate_probability
     if R is not None and distance > 0.0 and p < 1.0:
         d = min(len(offset), R.shape[0])
         u = offset[:d] / distance
-        margin = math.sqrt(float(chdtri(1, 1.0 - p)) * max(float(u @ R[:d, :d] @ u), 0.0))
+        margin = math.sqrt(_line_of_sight_gate(p) * max(float(u @ R[:d, :d] @ u), 0.0))
     return distance > detector.range + margin
+
+
+@functools.lru_cache(maxsize=16)
+def _line_of_sight_gate(p: float) -> float:
+    """The one-dimensional chi-square quantile of ``p`` (once per gate probability)."""
+    return float(chdtri(1, 1.0 - p))
