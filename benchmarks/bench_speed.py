@@ -92,6 +92,10 @@ CHANGES = (
     "`np.broadcast_to` and a copy); `DetectionOptions` a named tuple; the time-uncertainty "
     "terms of gating built only when a detection has one; grouping the lineages that are "
     "one object stops when no two estimates are near each other.",
+    "Twins, a cheap necessary bound first: two versions of a lineage are compared in full "
+    "only when their first-mode states are within sqrt(merge_distance * trace(P)) (in a "
+    "long match a lineage has up to 120 versions, 15,000 ordered pairs, one in eight "
+    "within the bound); the detections' range check computes its chi-square quantile once.",
 )
 
 
