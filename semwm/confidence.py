@@ -87,11 +87,24 @@ class ConfidenceBook:
 def representatives(state: MHFState) -> dict[int, Track]:
     """Each lineage's version in the most probable hypothesis that holds it."""
     chosen: dict[int, Track] = {}
+    tracks = state.tracks
     for cluster in state.clusters:
+        if len(cluster.hypotheses) == 1:
+            for key in cluster.hypotheses[0].tracks:
+                track = tracks[key]
+                chosen.setdefault(track.lineage, track)
+            continue
+        # every lineage of the cluster, to stop at the first hypotheses that hold them all
+        pending = {tracks[key].lineage for key in cluster.keys}
+        pending.difference_update(chosen)
         for h in cluster.hypotheses:
             for key in h.tracks:
-                track = state.tracks[key]
-                chosen.setdefault(track.lineage, track)
+                track = tracks[key]
+                if track.lineage in pending:
+                    chosen[track.lineage] = track
+                    pending.discard(track.lineage)
+            if not pending:
+                break
     return chosen
 
 
