@@ -81,6 +81,7 @@ def create_app(settings: Settings, *, fast_ingest: bool = True) -> FastAPI:
                 settings.knowledge,
                 reorder_window=settings.reorder_window,
                 hold=settings.hold,
+                order_tolerance=settings.order_tolerance,
                 write_back=settings.write_back,
                 time_guard=TimeGuard(settings.max_ahead, settings.max_jump),
                 max_sources=settings.max_sources,

@@ -85,6 +85,9 @@ class WorldCollector(Collector):
             ("held_scans", "Scans held by --hold, not yet processed", stats["held_scans"]),
             ("replayed_scans", "Scans processed again because an older one came after them "
              "(since start or reset; --hold avoids them)", stats["replayed_scans"]),
+            ("arrival_order_scans", "Concurrent scans processed in arrival order instead "
+             "of replayed (--order-tolerance; since start or reset)",
+             stats["arrival_order_scans"]),
             ("knowledge_version", "Knowledge version: 1 at start, +1 per edit or reload",
              stats["knowledge_version"]),
             ("stream_subscribers", "Open GET /world/stream connections", self._subscribers()),

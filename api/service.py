@@ -40,7 +40,13 @@ from semwm.persistence.records import (
     knowledge_record,
     reset_record,
 )
-from semwm.sources import SourceRegistry, SourceStatus, TimeGuard, TimeGuardError
+from semwm.sources import (
+    DEFAULT_ORDER_TOLERANCE,
+    SourceRegistry,
+    SourceStatus,
+    TimeGuard,
+    TimeGuardError,
+)
 from semwm.team import LocalModel
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 
@@ -165,6 +171,11 @@ class WorldService:
         Write accepted class edits to ``knowledge_path``.
     time_guard
         Bounds on detection times (:class:`semwm.sources.TimeGuard`).
+    order_tolerance
+        Scans of different sources at most this many seconds older than the newest
+        processed scan are processed in arrival order, their time moved just after it,
+        instead of replayed (:mod:`semwm.sources`; 0: strict time order). Not with a
+        hold (it orders them itself).
     clock
         The service clock (s); detections of synced sources are placed on it.
     """
@@ -179,8 +190,11 @@ class WorldService:
         idempotency_keys: int = 1024,
         stuck_after: float = 30.0,
         time_guard: TimeGuard | None = None,
+        order_tolerance: float = DEFAULT_ORDER_TOLERANCE,
         clock: Callable[[], float] = time.time,
     ) -> None:
+        if not (math.isfinite(order_tolerance) and order_tolerance >= 0.0):
+            raise ValueError(f"order_tolerance must be a finite number >= 0; got {order_tolerance}")
         self._model = model
         self._lock = TimeOrderedLock()  # queued scans enter in time order: no replay
         self.knowledge_path = knowledge_path
@@ -198,6 +212,8 @@ class WorldService:
         self._listeners: list[ChangeListener] = []
         self.knowledge_version = 1
         self.sources = SourceRegistry(time_guard)
+        self.order_tolerance = order_tolerance
+        self.arrival_order_scans = 0  # scans placed in arrival order (since start or reset)
         self._sources_lock = threading.Lock()  # taken inside self._lock, never around it
         self.clock = clock
         self._locals: dict[str, LocalModel] = {}  # two levels: robots' local models
@@ -350,10 +366,21 @@ class WorldService:
             now = self.clock()
             try:
                 with self._sources_lock:
-                    placement = self.sources.place(list(detections), now)
+                    placement = self.sources.place(
+                        list(detections),
+                        now,
+                        newest=self._model.processed_time if self._model.hold == 0 else None,
+                        tolerance=self.order_tolerance,
+                    )
                     if sensor is not None and sensor.get("time") is not None:
                         owner = sensor.get("source", _first_source(detections))
                         placed_time = self.sources.to_service_time(owner, sensor["time"])
+                        if isinstance(placed_time, int | float) and not isinstance(
+                            placed_time, bool
+                        ):
+                            placed_time = placement.moved.get(
+                                (owner or None, float(placed_time)), placed_time
+                            )
                         sensor = {**sensor, "time": placed_time}
             except TimeGuardError as error:
                 raise InvalidError(_time_items(error, batch)) from error
@@ -384,6 +411,7 @@ class WorldService:
                     raise ConflictError(message + hint) from error
             with self._sources_lock:
                 self.sources.accepted(placement, now)
+            self.arrival_order_scans += len(placement.moved)
             if self._listeners:
                 self._notify(
                     WorldChange(
@@ -560,6 +588,7 @@ class WorldService:
                 "tracks": self._model.track_count,
                 "held_scans": self._model.pending_scans,
                 "replayed_scans": self._model.replayed_scans,
+                "arrival_order_scans": self.arrival_order_scans,
                 "knowledge_version": self.knowledge_version,
             }
 
@@ -600,6 +629,7 @@ class WorldService:
         with self._locked():
             with self._change(), self._hooked(reset_record()):
                 self._model.reset()
+                self.arrival_order_scans = 0
                 self._sources = set()
                 self._locals = {}
                 with self._sources_lock:

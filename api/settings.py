@@ -11,6 +11,7 @@ from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from semwm.mqtt.protocol import check_topic_part, parse_broker_url
+from semwm.sources import DEFAULT_ORDER_TOLERANCE
 
 LOOPBACK_NAMES = ("127.0.0.1", "localhost", "::1", "[::1]")
 MiB = 1024 * 1024
@@ -48,6 +49,10 @@ class Settings(BaseSettings):
         processed in time order once older: arrivals out of order by less than the
         hold cost no replay (queries still include them). 0: process at once. About
         the sources' arrival jitter (docs/operations.md).
+    order_tolerance
+        Scans of different sources at most this many seconds older than the newest
+        processed scan are processed in arrival order (their time moved just after
+        it) instead of replayed; 0: strict time order (docs/operations.md).
     max_batch
         The largest batch ``POST /detections`` accepts.
     max_ahead, max_jump
@@ -117,6 +122,9 @@ class Settings(BaseSettings):
     port: Annotated[int, Field(ge=0, le=65535)] = 8000
     reorder_window: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 0.5
     hold: Annotated[float, Field(ge=0.0, le=60.0, allow_inf_nan=False)] = 0.0
+    order_tolerance: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = (
+        DEFAULT_ORDER_TOLERANCE
+    )
     max_batch: Annotated[int, Field(ge=1)] = 10000
     write_back: bool = False
     data_dir: Path | None = None

@@ -243,7 +243,7 @@ def _grid(n: int) -> dict[str, Any]:
     }
 
 
-def _team_stream(seconds: float = 6.0, warmup_batches: int = 150) -> dict[str, Any]:
+def team_stream(seconds: float = 6.0, warmup_batches: int = 150) -> dict[str, Any]:
     """The team's stream of ``bench_teamload`` in process: 5 robots x 10 detections x
     30 Hz on 20 shared objects (``sim1.yaml``), one ``ingest`` per robot's batch; CPU
     per batch after a warm-up (the mean of the timed batches)."""
@@ -297,7 +297,7 @@ def measure_core(part: str, grid_sizes: tuple[int, ...]) -> dict[str, Any]:
         result["long"] = {
             name: _timed_run(name, sizes=sizes) for name, sizes in LONG_SCENARIOS.items()
         }
-        result["team_stream"] = _team_stream()
+        result["team_stream"] = team_stream()
     elif part == "profile":
         result["profile"] = _profile("robocup")
     else:

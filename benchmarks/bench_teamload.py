@@ -1,6 +1,7 @@
 """A team's load (issue 15 defect 6): 5 robots x 10 detections x 30 Hz on 20 shared objects.
 
-Run: ``python benchmarks/bench_teamload.py [--seconds 60] [--hold S] [--out FILE]``
+Run: ``python benchmarks/bench_teamload.py [--seconds 60] [--hold S] [--order-tolerance S]
+[--out FILE]``
 
 A real ``semwm serve --knowledge knowledge/sim1.yaml`` in its own process on a
 loopback port (:func:`bench_soak.launch`). Twenty static objects (cups and coke
@@ -14,6 +15,11 @@ how far behind schedule the robots ended, POST and GET latency p50/p99, errors,
 the objects published at the end against the 18 that some robot sees, and the server
 process's CPU per batch (real time needs at most 6.67 ms on one core). The issue's
 target: keeps up in real time (processed = offered) with POST p99 < 50 ms.
+
+The machine's moment: the same stream in process (``bench_speed.team_stream``, 3 s,
+CPU per batch), measured just before and just after the HTTP run. On a shared machine
+the same code runs up to 2-3x slower at busy moments; this figure says which moment a
+run had (about 1.5-1.7 ms per batch on a quiet 2-core x86_64 box in 2026-11).
 Writes JSON to ``--out`` (default ``benchmarks/out/teamload.json``).
 """
 
@@ -109,9 +115,14 @@ def percentiles(values: list[float]) -> dict[str, float]:
     }
 
 
-def run(seconds: float, hold: float = 0.0) -> dict[str, Any]:
+def run(seconds: float, hold: float = 0.0, order_tolerance: float | None = None) -> dict[str, Any]:
+    from bench_speed import team_stream
+
+    before = team_stream(seconds=3.0)["cpu_ms_per_batch"]
     with tempfile.TemporaryDirectory() as tmp:
         options = ["--reorder-window", "1.0", "--hold", str(hold)]
+        if order_tolerance is not None:
+            options += ["--order-tolerance", str(order_tolerance)]
         process, url = launch(options, Path(tmp) / "server.log")
         try:
             results: dict[str, Any] = {}
@@ -137,6 +148,7 @@ def run(seconds: float, hold: float = 0.0) -> dict[str, Any]:
         finally:
             process.terminate()
             process.wait(10)
+    after = team_stream(seconds=3.0)["cpu_ms_per_batch"]
     posts = [v for r in range(ROBOTS) for v in results[f"r{r}"]["latencies"]]
     applied = sum(results[f"r{r}"]["applied"] for r in range(ROBOTS))
     offered = ROBOTS * PER_BATCH * RATE_HZ
@@ -153,6 +165,7 @@ def run(seconds: float, hold: float = 0.0) -> dict[str, Any]:
             "objects": len(OBJECTS),
             "seconds": seconds,
             "hold": hold,
+            "order_tolerance": "default" if order_tolerance is None else order_tolerance,
         },
         "offered_det_per_s": offered,
         "processed_det_per_s": round(processed, 1),
@@ -162,6 +175,7 @@ def run(seconds: float, hold: float = 0.0) -> dict[str, Any]:
         "get_world_ms": percentiles(results["reader"]),
         "errors": sum(results[f"r{r}"]["errors"] for r in range(ROBOTS)),
         "replayed_scans": _metric(metrics, "semwm_replayed_scans"),
+        "arrival_order_scans": _metric(metrics, "semwm_arrival_order_scans"),
         # the world model's part of an accepted batch, under the lock (the rest: HTTP)
         "apply_ms_mean": _mean_ms(metrics, "semwm_ingest_apply_seconds"),
         "server_ms_mean": _mean_ms(metrics, "semwm_ingest_latency_seconds"),
@@ -172,6 +186,8 @@ def run(seconds: float, hold: float = 0.0) -> dict[str, Any]:
         "objects_seen": len(
             {(2 * r + k) % len(OBJECTS) for r in range(ROBOTS) for k in range(PER_BATCH)}
         ),
+        # the machine's moment: the stream in process, CPU ms per batch, before and after
+        "in_process_ms_per_batch": [round(before, 2), round(after, 2)],
         "target_met": bool(processed >= 0.98 * offered and post["p99"] < 50.0),
     }
 
@@ -186,9 +202,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--hold", type=float, default=0.0, help="semwm serve --hold (s)")
+    parser.add_argument(
+        "--order-tolerance", type=float, help="semwm serve --order-tolerance (s; default: its own)"
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "teamload.json")
     args = parser.parse_args()
-    result = run(args.seconds, args.hold)
+    result = run(args.seconds, args.hold, args.order_tolerance)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(json.dumps({k: v for k, v in result.items() if k != "machine"}, indent=2))

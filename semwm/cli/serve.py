@@ -22,7 +22,8 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="run the HTTP service",
         description="Run the semwm HTTP service (OpenAPI at /docs). Every option can also be "
         "set from the environment: SEMWM_KNOWLEDGE, SEMWM_HOST, SEMWM_PORT, "
-        "SEMWM_REORDER_WINDOW, SEMWM_HOLD, SEMWM_MAX_BATCH, SEMWM_WRITE_BACK, SEMWM_TOKEN, "
+        "SEMWM_REORDER_WINDOW, SEMWM_HOLD, SEMWM_ORDER_TOLERANCE, SEMWM_MAX_BATCH, "
+        "SEMWM_WRITE_BACK, SEMWM_TOKEN, "
         "SEMWM_TOKEN_FILE, SEMWM_READ_TOKEN, SEMWM_INSECURE, SEMWM_CORS_ORIGINS, "
         "SEMWM_ALLOWED_HOSTS (JSON lists), SEMWM_MAX_BODY, SEMWM_MAX_SOURCES, "
         "SEMWM_STUCK_AFTER, SEMWM_MQTT, SEMWM_MQTT_PREFIX, SEMWM_MQTT_WORLD_RATE, "
@@ -39,6 +40,13 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         type=float,
         help="seconds detections are held to be processed in time order without replay "
         "(default 0; about the sources' arrival jitter)",
+    )
+    parser.add_argument(
+        "--order-tolerance",
+        type=float,
+        help="seconds: scans of different sources this close to the newest processed one "
+        "are processed in arrival order instead of replayed (default 0.005; 0: strict "
+        "time order)",
     )
     parser.add_argument("--max-batch", type=int, help="largest batch (default 10000)")
     parser.add_argument(
@@ -167,6 +175,7 @@ def run_serve(args: argparse.Namespace) -> int:
             "port",
             "reorder_window",
             "hold",
+            "order_tolerance",
             "max_batch",
             "write_back",
             "foxglove_port",
