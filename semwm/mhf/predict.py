@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -50,33 +51,61 @@ def conform(
     )
 
 
+Shape = tuple[int, int]
+
+
 @dataclass(frozen=True)
 class Predicted:
     """Object versions predicted to one time, in the order they were given.
 
-    ``x``, ``P``, ``mu`` are lists of per-track arrays (filters differ in size);
     ``position`` ``(N, d)`` and ``position_covariance`` ``(N, d, d)`` are stacked.
-    ``batches`` holds the same states stacked per filter shape (``(M, n)`` ->
-    ``(x, P, mu)`` with ``(K, M, n)``, ``(K, M, n, n)``, ``(K, M)``) and
-    ``batch_row[i]`` is track ``i``'s row in its shape's batch, so that batched
-    updates (the same equations for every class of one shape) index them instead of
-    stacking rows again.
+    ``batches`` holds the states stacked per filter shape (``(M, n)`` -> ``(x, P,
+    mu, mean)`` with ``(K, M, n)``, ``(K, M, n, n)``, ``(K, M)`` and the combined
+    means ``(K, n)``); track ``i`` has filter shape ``shapes[i]`` and is row
+    ``batch_row[i]`` of its shape's batch, so that batched updates (the same equations
+    for every class of one shape) index them instead of stacking rows again. The
+    per-track lists ``x``, ``P``, ``mu`` and ``state_mean`` (filters differ in size)
+    are made when first read.
     """
 
     tracks: tuple[Track, ...]
-    x: list[FloatArray]
-    P: list[FloatArray]
-    mu: list[FloatArray]
-    state_mean: list[FloatArray]
     position: FloatArray
     position_covariance: FloatArray
-    batches: dict[tuple[int, int], tuple[FloatArray, FloatArray, FloatArray]] = field(
+    batches: dict[Shape, tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = field(
         default_factory=dict
     )
     batch_row: IndexArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    shapes: tuple[Shape, ...] = ()
     _inside: dict[Region | None, FloatArray] = field(
         default_factory=dict, compare=False, repr=False
     )
+
+    def _rows(self, part: int) -> list[FloatArray]:
+        batches = self.batches
+        return [
+            batches[shape][part][row]
+            for shape, row in zip(self.shapes, self.batch_row.tolist(), strict=True)
+        ]
+
+    @cached_property
+    def x(self) -> list[FloatArray]:
+        """Each track's mode states ``(M, n)``."""
+        return self._rows(0)
+
+    @cached_property
+    def P(self) -> list[FloatArray]:
+        """Each track's mode covariances ``(M, n, n)``."""
+        return self._rows(1)
+
+    @cached_property
+    def mu(self) -> list[FloatArray]:
+        """Each track's mode probabilities ``(M,)``."""
+        return self._rows(2)
+
+    @cached_property
+    def state_mean(self) -> list[FloatArray]:
+        """Each track's combined state mean ``(n,)``."""
+        return self._rows(3)
 
     def inside_region(self, region: Region | None) -> FloatArray:
         """Each object's probability of being inside ``region``
@@ -92,49 +121,43 @@ class Predicted:
         """``(N, dim)``: each object's predicted velocity (its combined state mean's
         entries after the position; zero for a filter without velocity)."""
         result = np.zeros((len(self.tracks), dim))
-        for i, mean in enumerate(self.state_mean):
+        for shape, (_, _, _, mean) in self.batches.items():
             if mean.shape[-1] >= 2 * dim:
-                result[i] = mean[..., dim : 2 * dim].reshape(-1)[:dim]
+                rows = [i for i, s in enumerate(self.shapes) if s == shape]
+                result[rows] = mean[self.batch_row[rows], dim : 2 * dim]
         return result
 
     def subset(self, rows: list[int]) -> Predicted:
         """The predictions of ``rows``, in that order."""
         return Predicted(
             tuple(self.tracks[i] for i in rows),
-            [self.x[i] for i in rows],
-            [self.P[i] for i in rows],
-            [self.mu[i] for i in rows],
-            [self.state_mean[i] for i in rows],
             self.position[rows],
             self.position_covariance[rows],
             self.batches,
             self.batch_row[rows],
+            tuple(self.shapes[i] for i in rows),
         )
 
     def stacked(self, rows: IndexArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``x``, ``P``, ``mu`` of ``rows`` (tracks of one filter shape), stacked."""
-        x, P, mu = self.batches[self.shape(int(rows[0]))]
+        x, P, mu, _ = self.batches[self.shapes[int(rows[0])]]
         in_batch = self.batch_row[rows]
         return x[in_batch], P[in_batch], mu[in_batch]
 
-    def shape(self, row: int) -> tuple[int, int]:
+    def shape(self, row: int) -> Shape:
         """``(M, n)``: modes and state size of track ``row``'s filter."""
-        modes, size = self.x[row].shape
-        return modes, size
+        return self.shapes[row]
 
 
 def predict_tracks(tracks: Sequence[Track], time: float, factory: FilterFactory) -> Predicted:
     """Predict every track to ``time`` (s), one batched call per class filter."""
     d = factory.dim
     count = len(tracks)
-    xs: list[FloatArray] = [_EMPTY] * count
-    Ps: list[FloatArray] = [_EMPTY] * count
-    mus: list[FloatArray] = [_EMPTY] * count
-    means: list[FloatArray] = [_EMPTY] * count
     position = np.zeros((count, d))
     position_covariance = np.zeros((count, d, d))
     batch_row = np.zeros(count, dtype=np.intp)
-    by_shape: dict[tuple[int, int], list[tuple[list[int], FloatArray, FloatArray, FloatArray]]]
+    shapes: list[Shape] = [(0, 0)] * count
+    by_shape: dict[Shape, list[tuple[list[int], FloatArray, FloatArray, FloatArray, FloatArray]]]
     by_shape = defaultdict(list)
     groups: dict[str, list[int]] = defaultdict(list)
     for i, track in enumerate(tracks):
@@ -158,24 +181,25 @@ def predict_tracks(tracks: Sequence[Track], time: float, factory: FilterFactory)
         idx = np.asarray(members)
         position[idx] = x_hat[:, :d]
         position_covariance[idx] = P_hat[:, :d, :d]
-        by_shape[shape].append((members, x, P, mu))
-        for row, i in enumerate(members):
-            xs[i], Ps[i], mus[i], means[i] = x[row], P[row], mu[row], x_hat[row]
+        by_shape[shape].append((members, x, P, mu, x_hat))
+        for i in members:
+            shapes[i] = shape
     batches = {shape: _stack_shape(parts, batch_row) for shape, parts in by_shape.items()}
     return Predicted(
-        tuple(tracks), xs, Ps, mus, means, position, position_covariance, batches, batch_row
+        tuple(tracks), position, position_covariance, batches, batch_row, tuple(shapes)
     )
 
 
 def _stack_shape(
-    parts: list[tuple[list[int], FloatArray, FloatArray, FloatArray]], batch_row: IndexArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
+    parts: list[tuple[list[int], FloatArray, FloatArray, FloatArray, FloatArray]],
+    batch_row: IndexArray,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """One filter shape's batch from its classes' batches; sets ``batch_row`` of their
     tracks."""
     if len(parts) == 1:
-        members, x, P, mu = parts[0]
+        members, x, P, mu, mean = parts[0]
         batch_row[members] = np.arange(len(members))
-        return x, P, mu
+        return x, P, mu, mean
     start = 0
     for members, *_ in parts:
         batch_row[members] = np.arange(start, start + len(members))
@@ -184,7 +208,5 @@ def _stack_shape(
         np.concatenate([part[1] for part in parts]),
         np.concatenate([part[2] for part in parts]),
         np.concatenate([part[3] for part in parts]),
+        np.concatenate([part[4] for part in parts]),
     )
-
-
-_EMPTY = np.empty(0)
