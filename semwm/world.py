@@ -25,6 +25,7 @@ import numpy as np
 from pydantic import ValidationError
 from scipy.optimize import linear_sum_assignment
 
+from semwm.collector import collector_paused
 from semwm.confidence import (
     CONFIDENCE_STATES,
     Confidence,
@@ -392,7 +393,17 @@ class WorldModel:
             A detection is malformed or does not fit the knowledge; nothing applied.
         OutOfOrderError
             A detection is older than the reorder window allows; nothing applied.
+
+        Python's cyclic garbage collector is paused meanwhile (:mod:`semwm.collector`).
         """
+        with collector_paused():
+            return self._ingest(detections, sensor)
+
+    def _ingest(
+        self,
+        detections: DetectionInput | Iterable[DetectionInput],
+        sensor: SensorReport | Mapping[str, Any] | None,
+    ) -> IngestResult:
         batch = as_batch(detections)
         parsed = parse(batch)
         measurements = check(parsed, self._knowledge, self._mhf.factory, self._seq)

@@ -1,0 +1,75 @@
+"""The cyclic garbage collector is paused while a batch is processed and resumed after,
+as it was, however pauses overlap."""
+
+from __future__ import annotations
+
+import gc
+import threading
+from collections.abc import Iterator
+
+import pytest
+
+from semwm.collector import collector_paused
+from semwm.detection import DetectionError
+from semwm.knowledge.loader import load_knowledge
+from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.world import WorldModel
+
+
+@pytest.fixture(autouse=True)
+def _collector_enabled() -> Iterator[None]:
+    gc.enable()
+    yield
+    gc.enable()
+
+
+def test_paused_within_and_resumed_after() -> None:
+    with collector_paused():
+        assert not gc.isenabled()
+    assert gc.isenabled()
+
+
+def test_overlapping_pauses_resume_when_the_last_one_ends() -> None:
+    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
+    seen: list[bool] = []
+
+    def first() -> None:
+        with collector_paused():
+            first_in.set()
+            second_in.wait(5)
+        first_out.set()
+
+    thread = threading.Thread(target=first)
+    thread.start()
+    first_in.wait(5)
+    with collector_paused():
+        second_in.set()
+        first_out.wait(5)
+        seen.append(gc.isenabled())  # the first pause ended, this one has not
+    thread.join(5)
+    assert seen == [False]
+    assert gc.isenabled()
+
+
+def test_a_collector_disabled_before_stays_disabled() -> None:
+    gc.disable()
+    with collector_paused():
+        pass
+    assert not gc.isenabled()
+
+
+def test_ingest_processes_with_the_collector_paused_even_when_it_refuses() -> None:
+    model = WorldModel(load_knowledge(shipped_knowledge_path("sim1.yaml")))
+    during: list[bool] = []
+    process = model._process
+
+    def watched(*args: object, **kwargs: object) -> object:
+        during.append(gc.isenabled())
+        return process(*args, **kwargs)  # type: ignore[arg-type]
+
+    model._process = watched  # type: ignore[method-assign]
+    model.ingest([{"time": 1.0, "class": "Cup", "position": [1.0, 1.0]}])
+    assert during == [False] and gc.isenabled()
+    with pytest.raises(DetectionError):
+        model.ingest([{"time": 2.0, "class": "Nope", "position": [1.0, 1.0]}])
+    assert gc.isenabled()
