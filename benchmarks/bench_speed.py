@@ -96,6 +96,11 @@ CHANGES = (
     "only when their first-mode states are within sqrt(merge_distance * trace(P)) (in a "
     "long match a lineage has up to 120 versions, 15,000 ordered pairs, one in eight "
     "within the bound); the detections' range check computes its chi-square quantile once.",
+    "The garbage collector paused during `WorldModel.ingest` (`semwm/collector.py`): a scan "
+    "allocates thousands of short-lived acyclic containers, and every hundredth young "
+    "collection walked every live object of the process (about 20 % of a large grid's "
+    "frame); predictions keep their per-track lists unmade until read (was four array "
+    "views per track per scan).",
 )
 
 

@@ -68,7 +68,7 @@ def survive(
         left = np.where(total > 0.0, mu / np.where(total > 0.0, total, 1.0), 0.0) * (1.0 - stay)
     q = (1.0 - r) + r * (stay + left)
     q = np.maximum(q, 1e-300)
-    r_new = np.clip(r * stay / q, 0.0, 1.0)
+    r_new = np.minimum(np.maximum(r * stay / q, 0.0), 1.0)  # np.clip, without its wrappers
     return r_new, np.log(q)
 
 
@@ -83,11 +83,22 @@ def inside_probability(
     count = position.shape[0]
     if region is None or count == 0:
         return np.ones(count)
-    low, high = _bounds(region)
-    sigma = np.sqrt(np.maximum(np.diagonal(covariance, axis1=1, axis2=2), 1e-18))
-    per_axis = ndtr((high - position) / sigma) - ndtr((low - position) / sigma)
-    result: FloatArray = np.prod(np.clip(per_axis, 0.0, 1.0), axis=1)
+    corners = _corners(region)  # (2, d): upper, lower
+    sigma = np.sqrt(np.maximum(covariance.diagonal(axis1=1, axis2=2), 1e-18))
+    # one normal CDF call for both corners: (N, 2, d)
+    below = ndtr((corners - position[:, None, :]) / sigma[:, None, :])
+    per_axis = below[:, 0] - below[:, 1]  # in [0, 1]: the CDF is monotone
+    result: FloatArray = np.minimum(np.maximum(per_axis, 0.0), 1.0).prod(axis=1)
     return result
+
+
+@functools.lru_cache(maxsize=64)
+def _corners(region: Region) -> FloatArray:
+    """``(2, d)``: the region's upper corner, then its lower one (made once per region)."""
+    low, high = _bounds(region)
+    corners = np.stack((high, low))
+    corners.flags.writeable = False
+    return corners
 
 
 @functools.lru_cache(maxsize=64)
@@ -111,8 +122,10 @@ def near_rate(
     """
     rate = base
     for target, reach, value in relations:
-        if value > rate and float(np.linalg.norm(position - target)) <= reach:
-            rate = value
+        if value > rate:
+            offset = position - target
+            if math.sqrt(float(offset @ offset)) <= reach:  # what np.linalg.norm computes
+                rate = value
     return rate
 
 
