@@ -259,6 +259,7 @@ class SourceRegistry:
         problems: list[TimeProblem] = []
         latest: dict[str | None, float] = {}
         counts: dict[str | None, int] = {}
+        earliest = math.inf
         for index, d in enumerate(detections):
             source = _field(d, "source")
             stamp = _field(d, "time")
@@ -271,6 +272,7 @@ class SourceRegistry:
                 if problem is not None:
                     problems.append(problem)
                 latest[source] = max(latest.get(source, -math.inf), float(time))
+                earliest = min(earliest, float(time))
             counts[source] = counts.get(source, 0) + 1
             placed.append(
                 _with_time(d, time, record.clock.offset_std if record is not None else None)
@@ -284,7 +286,7 @@ class SourceRegistry:
                 record.problem = p.message
             raise TimeGuardError(problems)
         moved: dict[tuple[str | None, float], float] = {}
-        if tolerance > 0.0 and newest is not None:
+        if tolerance > 0.0 and newest is not None and earliest <= newest:
             moved = self._concurrent(placed, newest, tolerance)
         if moved:
             placed = [_moved(d, moved) for d in placed]
