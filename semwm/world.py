@@ -981,6 +981,10 @@ class WorldModel:
         candidates = [lineage for lineage, m in marginals.items() if m.existence >= _GROUPING_FLOOR]
         if len(candidates) < 2:
             return marginals
+        best_keys = self._state.best.tracks
+        together = {lineage for lineage in candidates if marginals[lineage].track.key in best_keys}
+        if len(together) == len(candidates):
+            return marginals  # the most probable hypothesis holds each as shown: all distinct
         parent = {lineage: lineage for lineage in candidates}
 
         def root(lineage: int) -> int:
@@ -1018,8 +1022,6 @@ class WorldModel:
         close = d2 <= _SAME_OBJECT_GATE
         if not close.any():
             return marginals
-        best_keys = self._state.best.tracks
-        together = {lineage for lineage in candidates if marginals[lineage].track.key in best_keys}
         for a, b in zip(aa[close].tolist(), bb[close].tolist(), strict=True):
             first, second = candidates[int(a)], candidates[int(b)]
             if first in together and second in together:
