@@ -192,6 +192,10 @@ def _moved(d: DetectionLike, moved: Mapping[tuple[str | None, float], float]) ->
     return {**d, "time": to}
 
 
+_Placed = tuple[list[DetectionLike], dict[str | None, float], dict[str | None, int], float]
+"""A batch placed: detections, latest time and count per source, earliest time."""
+
+
 class SourceRegistry:
     """Clocks, time guards and counts of every source.
 
@@ -255,6 +259,60 @@ class SourceRegistry:
             A placed time breaks a guard; the refusal is counted for its source and
             nothing else changes.
         """
+        plain = self._place_plain(detections, now)
+        placed, latest, counts, earliest = plain or self._place_each(detections, now)
+        moved: dict[tuple[str | None, float], float] = {}
+        if tolerance > 0.0 and newest is not None and earliest <= newest:
+            moved = self._concurrent(placed, newest, tolerance)
+        if moved:
+            placed = [_moved(d, moved) for d in placed]
+            for d in placed:
+                source = _field(d, "source")
+                time = _field(d, "time")
+                if isinstance(time, float) and source in latest:
+                    latest[source] = max(latest[source], time)
+        return Placement(tuple(placed), latest, counts, moved)
+
+    def _place_plain(
+        self, detections: Sequence[DetectionLike], now: float | None
+    ) -> _Placed | None:
+        """:meth:`_place_each`'s result for the common batch, computed per source: plain
+        dicts with finite numeric times from sources that are not synced (their times
+        stay as stamped) and that pass the guards. The guards grow with the time, so
+        each source's latest time decides them. ``None`` for any other batch."""
+        span: dict[str | None, list[float]] = {}  # source -> [earliest, latest, count]
+        for d in detections:
+            if type(d) is not dict:
+                return None
+            time = d.get("time")
+            kind = type(time)
+            if kind is not float and kind is not int:
+                return None  # bool, str, missing: the general path says what is wrong
+            if time - time != 0:  # type: ignore[operator]
+                return None  # not finite
+            source = d.get("source")
+            known = span.get(source)
+            if known is None:
+                span[source] = [time, time, 1]  # type: ignore[list-item]
+            else:
+                if time < known[0]:  # type: ignore[operator]
+                    known[0] = time  # type: ignore[assignment]
+                elif time > known[1]:  # type: ignore[operator]
+                    known[1] = time  # type: ignore[assignment]
+                known[2] += 1
+        for index, (source, (_, last, _)) in enumerate(span.items()):
+            record = self._records.get(source)
+            if record is not None and record.clock.synced:
+                return None
+            if self._check(index, source, last, last, record, now) is not None:
+                return None  # the general path finds every refused detection
+        latest = {source: float(last) for source, (_, last, _) in span.items()}
+        counts = {source: int(count) for source, (_, _, count) in span.items()}
+        earliest = min((float(first) for first, _, _ in span.values()), default=math.inf)
+        return list(detections), latest, counts, earliest
+
+    def _place_each(self, detections: Sequence[DetectionLike], now: float | None) -> _Placed:
+        """Every detection placed and checked one by one (raises :class:`TimeGuardError`)."""
         placed: list[DetectionLike] = []
         problems: list[TimeProblem] = []
         latest: dict[str | None, float] = {}
@@ -285,17 +343,7 @@ class SourceRegistry:
                 record.refused += 1
                 record.problem = p.message
             raise TimeGuardError(problems)
-        moved: dict[tuple[str | None, float], float] = {}
-        if tolerance > 0.0 and newest is not None and earliest <= newest:
-            moved = self._concurrent(placed, newest, tolerance)
-        if moved:
-            placed = [_moved(d, moved) for d in placed]
-            for d in placed:
-                source = _field(d, "source")
-                time = _field(d, "time")
-                if isinstance(time, float) and source in latest:
-                    latest[source] = max(latest[source], time)
-        return Placement(tuple(placed), latest, counts, moved)
+        return placed, latest, counts, earliest
 
     def _concurrent(
         self, placed: Sequence[DetectionLike], newest: float, tolerance: float

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from semwm.clock import ClockEstimate, Exchange, ExchangeError
@@ -140,3 +141,31 @@ def test_a_delayed_exchange_among_a_few_does_not_count() -> None:
     for k, (out, back) in enumerate(delays):
         estimate = estimate.add(exchange(float(k), 0.0, out, back))
     assert estimate.offset is not None and abs(estimate.offset) < 0.02
+
+
+def test_batches_placed_per_source_match_one_by_one_placement() -> None:
+    """The per-source shortcut for plain batches gives what placing each detection does,
+    refusals included (then it steps aside), on random batches of several sources."""
+    rng = np.random.default_rng(3)
+    for trial in range(200):
+        registry = SourceRegistry(TimeGuard(max_ahead=10.0, max_jump=5.0))
+        registry.accepted(registry.place([{"time": 100.0, "source": "a"}], 100.0), 100.0)
+        if trial % 3 == 0:
+            registry.sync("b", Exchange(0.0, 1.0, 1.0, 0.1))  # synced: no shortcut
+        batch: list[dict[str, object]] = []
+        for _ in range(int(rng.integers(1, 8))):
+            time: object = float(100.0 + rng.uniform(-2.0, 12.0))
+            if rng.random() < 0.1:
+                time = int(time)
+            if rng.random() < 0.05:
+                time = rng.choice(["x", True, float("nan")])
+            batch.append({"time": time, "source": rng.choice(["a", "b", None])})
+        plain = registry._place_plain(batch, 100.5)
+        try:
+            each = registry._place_each(batch, 100.5)
+        except TimeGuardError:
+            assert plain is None
+            continue
+        if plain is not None:
+            assert all(x is y for x, y in zip(plain[0], each[0], strict=True))
+            assert plain[1:] == each[1:]
