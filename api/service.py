@@ -327,12 +327,15 @@ class WorldService:
         stamps = [_stamp(d) for d in detections]
         if sensor is not None:
             stamps.append((sensor.get("source", _first_source(detections)), sensor.get("time")))
+        earliest: dict[str | None, float] = {}  # per source: placing keeps the order
+        for source, t in stamps:
+            # a time the model will refuse (not a number, infinite) does not jump ahead
+            if isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t):
+                known = earliest.get(source)
+                if known is None or t < known:
+                    earliest[source] = t
         with self._sources_lock:
-            times = [
-                self.sources.to_service_time(source, t)
-                for source, t in stamps
-                if isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t)
-            ]  # a time the model will refuse (not a number, infinite) does not jump ahead
+            times = [self.sources.to_service_time(source, t) for source, t in earliest.items()]
         return min(times, default=-math.inf)
 
     def _summarise(self) -> dict[str, Any]:
