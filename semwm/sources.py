@@ -109,6 +109,7 @@ class SourceStatus:
     late: int
     refused: int
     problem: str | None
+    in_arrival_order: int = 0
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -123,6 +124,7 @@ class SourceStatus:
             "late": self.late,
             "refused": self.refused,
             "problem": self.problem,
+            "in_arrival_order": self.in_arrival_order,
         }
 
 
@@ -135,6 +137,7 @@ class _Record:
     late: int = 0
     refused: int = 0
     problem: str | None = None
+    in_arrival_order: int = 0  # scans placed in arrival order (concurrent with another's)
 
 
 @dataclass(frozen=True)
@@ -407,6 +410,8 @@ class SourceRegistry:
 
     def accepted(self, placement: Placement, now: float | None = None) -> None:
         """Count a placed batch that the world model applied."""
+        for source, _ in placement.moved:
+            self._record(source).in_arrival_order += 1
         for source, count in placement.counts.items():
             record = self._record(source)
             record.detections += count
@@ -445,6 +450,7 @@ class SourceRegistry:
             late=record.late,
             refused=record.refused,
             problem=record.problem,
+            in_arrival_order=record.in_arrival_order,
         )
 
     def status(self, name: str | None = None) -> SourceStatus | None:

@@ -63,6 +63,11 @@ class SourceOut(BaseModel):
     late: int = Field(description="detections refused as older than the reorder window")
     refused: int = Field(description="detections refused by a time guard")
     problem: str | None = Field(description="why its last detections were refused, if they were")
+    in_arrival_order: int = Field(
+        default=0,
+        description="scans processed in arrival order: at most --order-tolerance older than "
+        "another source's newest processed scan (docs/operations.md)",
+    )
 
     @classmethod
     def of(cls, status: SourceStatus) -> SourceOut:

@@ -40,6 +40,11 @@ def _run(tolerance: float | None) -> tuple[dict[str, Any], float, float]:
                 assert client.post("/detections", json={"detections": scan}).status_code == 200
         metrics = client.get("/metrics").text
         world = client.get("/world", params={"time": 102.5}).json()
+        sources = {
+            s["name"]: s["in_arrival_order"] for s in client.get("/sources").json()["sources"]
+        }
+    assert sum(sources.values()) == _metric(metrics, "semwm_arrival_order_scans")
+    assert sources["r3"] == 0  # the newest of each instant: always in order
     return (
         world,
         _metric(metrics, "semwm_replayed_scans"),
