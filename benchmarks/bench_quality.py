@@ -87,6 +87,7 @@ CONFIGS: dict[str, ScenarioConfig] = {
     "corner_occlusion": ScenarioConfig({}, {}, 10.0),
     "door_exits": ScenarioConfig({"duration": 45.0}, {"duration": 30.0}, 10.0),
     "datasheet": ScenarioConfig({"duration": 45.0}, {"duration": 30.0}, 10.0),
+    "patrol": ScenarioConfig({}, {"duration": 45.0}, 10.0),
 }
 
 

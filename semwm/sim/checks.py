@@ -14,6 +14,8 @@ every truth time) and answers one yes/no question with a one-line reason:
 * :func:`labels_kept`: every labelled real object (a peer robot) is published in
   every frame under its label and one id (robocup: "peers keep label and id for
   the whole run").
+* :func:`static_objects_kept`: every static real object, once reported, stays
+  published under one id with its class while the sensor looks elsewhere (patrol).
 
 :data:`SCENARIO_CHECKS` says which checks apply to which scenario. Frames are
 matched by the GOSPA assignment of :func:`semwm.sim.metrics.gospa_frame` with the
@@ -160,6 +162,61 @@ def labels_kept(
     return CheckResult("labels and ids kept", bool(labels) and not failures, detail)
 
 
+STATIC_GRACE = 1.0
+"""Seconds after a static object's first report by which :func:`static_objects_kept`
+wants it published (a few detections at the datasheet rates)."""
+
+
+def static_objects_kept(
+    truth: Sequence[TruthFrame],
+    worlds: Sequence[WorldState],
+    *,
+    static_ids: Sequence[str],
+    first_seen: dict[str, float],
+    c: float,
+) -> CheckResult:
+    """Every static real object, from ``STATIC_GRACE`` s after its first report to the
+    end of the run, has a published object of its class within ``c`` in every frame,
+    and the nearest such object has the same id throughout. Static objects never
+    reported are not asked for.
+
+    Matched by class and distance rather than by the GOSPA assignment, which ignores
+    classes: a person walking past a pallet may take the pallet's GOSPA match for a
+    frame without the pallet's estimate changing."""
+    failures: dict[str, str] = {}
+    ids: dict[str, set[int]] = {}
+    for frame, state in zip(truth, worlds, strict=True):
+        real_objects = {o.id: o for o in frame.objects}
+        for real_id in static_ids:
+            seen = first_seen.get(real_id)
+            real = real_objects.get(real_id)
+            if seen is None or real is None or frame.time < seen + STATIC_GRACE:
+                continue
+            if real_id in failures:
+                continue
+            distances = [
+                (float(np.linalg.norm(np.subtract(o.position[:2], real.position[:2]))), o.id)
+                for o in state.objects
+                if o.cls == real.cls
+            ]
+            near = [(d, i) for d, i in distances if d < c]
+            if not near:
+                failures[real_id] = f"no {real.cls} published within {c:g} m at t={frame.time:g}"
+                continue
+            ids.setdefault(real_id, set()).add(min(near)[1])
+    for real_id, estimate_ids in ids.items():
+        if real_id not in failures and len(estimate_ids) > 1:
+            listed = ", ".join(map(str, sorted(estimate_ids)))
+            failures[real_id] = f"{len(estimate_ids)} ids ({listed})"
+    asked = [r for r in static_ids if r in first_seen]
+    detail = (
+        "; ".join(f"{k}: {v}" for k, v in sorted(failures.items()))
+        if failures
+        else f"{len(asked)} static objects seen, each kept under one id with its class"
+    )
+    return CheckResult("static objects kept", not failures, detail)
+
+
 REGION_MARGIN = 0.25
 """How far (m) outside the region a published object may be before
 :func:`inside_region` fails it in :data:`SCENARIO_CHECKS`: about 1.7 sigma of the
@@ -199,6 +256,20 @@ def _datasheet(result: RunResult) -> list[CheckResult]:
     ]
 
 
+def _patrol(result: RunResult) -> list[CheckResult]:
+    s = result.scenario
+    static_ids = s.metadata.get("static_ids", [])
+    first_seen = s.metadata.get("first_seen", {})
+    if not isinstance(static_ids, list) or not isinstance(first_seen, dict):
+        raise TypeError("a patrol run's metadata needs static_ids (a list) and first_seen (a dict)")
+    return [
+        static_objects_kept(
+            s.truth, result.worlds, static_ids=static_ids, first_seen=first_seen, c=_c(result)
+        ),
+        inside_region(result.worlds, s.region, margin=REGION_MARGIN),
+    ]
+
+
 SCENARIO_CHECKS: dict[str, Callable[[RunResult], list[CheckResult]]] = {
     "sim1": _sim1_like,
     "tabletop_wrong_labels": _sim1_like,
@@ -207,6 +278,7 @@ SCENARIO_CHECKS: dict[str, Callable[[RunResult], list[CheckResult]]] = {
     "door_exits": _room,
     "robocup": _robocup,
     "datasheet": _datasheet,
+    "patrol": _patrol,
 }
 """Issue 9's acceptance checks per scenario name (sim1, sim2, robocup as the issue
 states them; each variant gets the checks of the scenario it hardens)."""

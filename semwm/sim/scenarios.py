@@ -19,6 +19,8 @@ Harder variants for the world-quality benchmark (issue 9, ``benchmarks/bench_qua
 * :func:`door_exits`: several people entering and leaving the room through its door.
 * :func:`datasheet`: people and boxes appearing in and leaving a sensor's field of view,
   meant for a knowledge file written only from the sensor's datasheet.
+* :func:`patrol`: a robot patrolling a warehouse with a short-range detector: pallets
+  and people out of view most of the time (a datasheet-only knowledge file).
 """
 
 from __future__ import annotations
@@ -1109,6 +1111,150 @@ def datasheet(
     )
 
 
+# --------------------------------------------------------------------------- patrol
+
+PATROL_REGION: Region = ((0.0, 30.0), (0.0, 20.0))
+"""The warehouse floor of :func:`patrol` (m)."""
+PATROL_LOOP: tuple[tuple[float, float], ...] = ((4.0, 4.0), (26.0, 4.0), (26.0, 16.0), (4.0, 16.0))
+"""The corners of the patrolling robot's closed route (m)."""
+
+
+def _loop_position(corners: np.ndarray, distance: float) -> np.ndarray:
+    """The point ``distance`` (m) along the closed polygon ``corners``, shape ``(n, 2)``."""
+    closed = np.vstack([corners, corners[:1]])
+    lengths = np.linalg.norm(np.diff(closed, axis=0), axis=1)
+    ends = np.cumsum(lengths)
+    s = distance % float(ends[-1])
+    i = int(np.searchsorted(ends, s, side="right"))
+    u = (s - (ends[i] - lengths[i])) / lengths[i]
+    return np.asarray(closed[i] + u * (closed[i + 1] - closed[i]))
+
+
+def patrol(
+    rng: np.random.Generator,
+    *,
+    duration: float = 90.0,
+    rate: float = 10.0,
+    recall: float = 0.85,
+    false_positives_per_frame: float = 0.3,
+    noise: float = 0.08,
+    sensor_range: float = 6.0,
+    robot_speed: float = 1.0,
+    n_pallets: int = 10,
+    n_people: int = 3,
+    walking_speed: tuple[float, float] = (0.8, 1.4),
+    seed: int | None = None,
+) -> Scenario:
+    """A robot patrols a warehouse with a 360-degree detector of limited range.
+
+    A harder variant nobody tuned for: the sensor moves, so most of the world is out
+    of view most of the time. ``benchmarks/knowledge/patrol.yaml`` is written from
+    the detector's datasheet only.
+
+    The robot drives the closed route :data:`PATROL_LOOP` at ``robot_speed`` m/s on
+    the 30 x 20 m floor (:data:`PATROL_REGION`). Its detector (``scanner``,
+    ``source="robot"``, ``sensor_position`` = the robot's position) runs at
+    ``rate`` Hz and reports each object within ``sensor_range`` m with probability
+    ``recall`` and position noise ``noise`` (m, std), plus
+    ``false_positives_per_frame`` false reports (Poisson, uniform over the part of
+    its disc on the floor, class Pallet or Person). ``n_pallets`` pallets stand
+    still at least 1.5 m apart; ``n_people`` people walk from one random point to
+    the next at a speed in ``walking_speed`` (m/s) and wait 0-4 s at each. The
+    truth holds every object in every frame, seen or not; ``metadata["first_seen"]``
+    gives the time each object was first reported.
+    """
+    if n_pallets < 0 or n_people < 0:
+        raise ValueError(f"need n_pallets >= 0, n_people >= 0; got {n_pallets}, {n_people}")
+    times = _frame_times(rate, duration)
+    dt = 1.0 / rate
+    corners = np.asarray(PATROL_LOOP, dtype=float)
+    pallets = _separated_points(rng, PATROL_REGION, n_pallets, 1.5, 1.0)
+    walkable: Region = ((1.0, 29.0), (1.0, 19.0))
+    people = _uniform(rng, walkable, n_people)
+    goals = _uniform(rng, walkable, n_people)
+    speeds = rng.uniform(*walking_speed, n_people)
+    waits = np.zeros(n_people)
+    ids = [f"pallet{i + 1}" for i in range(n_pallets)] + [f"person{i + 1}" for i in range(n_people)]
+    classes = ["Pallet"] * n_pallets + ["Person"] * n_people
+    first_seen: dict[str, float] = {}
+    truth: list[TruthFrame] = []
+    detections: list[Detection] = []
+    for t in times:
+        t = float(t)
+        velocities = np.zeros((n_people, 2))
+        for i in range(n_people):
+            if waits[i] > 0.0:
+                waits[i] -= dt
+                continue
+            offset = goals[i] - people[i]
+            distance = float(np.linalg.norm(offset))
+            if distance < 0.2:
+                waits[i] = rng.uniform(0.0, 4.0)
+                goals[i] = _uniform(rng, walkable, 1)[0]
+                continue
+            velocities[i] = offset / distance * speeds[i]
+            people[i] = people[i] + velocities[i] * dt
+        positions = np.vstack([pallets, people]) if n_pallets + n_people else np.zeros((0, 2))
+        speeds_now = np.vstack([np.zeros((n_pallets, 2)), velocities])
+        truth.append(
+            TruthFrame(
+                t,
+                tuple(
+                    TruthObject(ids[k], classes[k], _pos(positions[k]), _pos(speeds_now[k]))
+                    for k in range(len(ids))
+                ),
+            )
+        )
+        robot = _loop_position(corners, robot_speed * t)
+        sensor = _pos(robot)
+        for k in range(len(ids)):
+            if np.linalg.norm(positions[k] - robot) > sensor_range or rng.random() >= recall:
+                continue
+            first_seen.setdefault(ids[k], t)
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=classes[k],
+                    position=_pos(positions[k] + rng.normal(0.0, noise, 2)),
+                    source="robot",
+                    detector="scanner",
+                    sensor_position=sensor,
+                )
+            )
+        for _ in range(rng.poisson(false_positives_per_frame)):
+            radius = sensor_range * np.sqrt(rng.random())
+            angle = rng.uniform(0.0, 2.0 * np.pi)
+            xy = robot + radius * np.array([np.cos(angle), np.sin(angle)])
+            if not _inside(xy, PATROL_REGION):
+                continue
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=("Pallet", "Person")[int(rng.integers(2))],
+                    position=_pos(xy),
+                    source="robot",
+                    detector="scanner",
+                    sensor_position=sensor,
+                )
+            )
+    return Scenario(
+        name="patrol",
+        truth=truth,
+        detections=detections,
+        knowledge_file="patrol.yaml",
+        duration=float(times[-1]),
+        region=PATROL_REGION,
+        seed=seed,
+        metadata={
+            "gospa_c": 1.0,
+            "knowledge_dir": "benchmarks/knowledge",
+            "sensor_range": sensor_range,
+            "static_ids": ids[:n_pallets],
+            "first_seen": {k: round(v, 6) for k, v in first_seen.items()},
+        },
+    )
+
+
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "sim1": sim1,
     "sim2": sim2,
@@ -1118,6 +1264,7 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "corner_occlusion": corner_occlusion,
     "door_exits": door_exits,
     "datasheet": datasheet,
+    "patrol": patrol,
 }
 """Generators by name, as ``semwm simulate NAME`` knows them."""
 

@@ -20,10 +20,11 @@ from semwm.sim.scenarios import (
     datasheet,
     door_exits,
     make_scenario,
+    patrol,
     tabletop_wrong_labels,
 )
 
-VARIANTS = ("tabletop_wrong_labels", "corner_occlusion", "door_exits", "datasheet")
+VARIANTS = ("tabletop_wrong_labels", "corner_occlusion", "door_exits", "datasheet", "patrol")
 REPOSITORY = Path(__file__).resolve().parents[2]
 
 
@@ -165,3 +166,34 @@ def test_datasheet_rates_match_the_sensor_and_its_knowledge_file() -> None:
             else:
                 assert 0.8 <= np.hypot(*o.velocity) <= 1.5
     assert len({o.id for f in s.truth for o in f.objects if o.cls == "Person"}) > 10
+
+
+def test_patrol_reports_only_within_range_of_the_moving_sensor() -> None:
+    s = patrol(np.random.default_rng(0), duration=60.0)
+    knowledge = load_knowledge(_knowledge_path(s))
+    rate, recall, fp, reach = 10.0, 0.85, 0.3, 6.0  # the generator's defaults, the datasheet's
+    assert knowledge.classes["Pallet"].detection_frequency == pytest.approx(rate * recall)
+    assert knowledge.detectors["scanner"].clutter_frequency == pytest.approx(rate * fp)
+    assert knowledge.detectors["scanner"].range == reach
+    sensors = {d.sensor_position for d in s.detections}
+    assert len(sensors) > 100  # the robot moves
+    for d in s.detections:
+        assert d.sensor_position is not None
+        assert np.hypot(*np.subtract(d.position, d.sensor_position)) <= reach + 0.5
+    pallets = {o.id: o.position for o in s.truth[0].objects if o.cls == "Pallet"}
+    assert s.metadata["static_ids"] == sorted(pallets, key=lambda k: int(k[6:]))
+    for frame in s.truth:  # pallets stand still, people walk at most 1.4 m/s
+        for o in frame.objects:
+            if o.cls == "Pallet":
+                assert o.position == pallets[o.id]
+            else:
+                assert np.hypot(*o.velocity) <= 1.4 + 1e-9
+    first_seen = s.metadata["first_seen"]
+    assert isinstance(first_seen, dict) and set(first_seen) <= {o.id for o in s.truth[0].objects}
+    for real_id, t in first_seen.items():
+        frame = next(f for f in s.truth if f.time == t)
+        real = next(o for o in frame.objects if o.id == real_id)
+        assert any(
+            d.time == t and np.hypot(*np.subtract(d.position, real.position)) < 0.5
+            for d in s.detections
+        )
