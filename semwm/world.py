@@ -22,6 +22,7 @@ from operator import attrgetter
 from typing import Any, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 from pydantic import ValidationError
 from scipy.optimize import linear_sum_assignment
 
@@ -57,7 +58,7 @@ from semwm.world_types import HypothesisObject, HypothesisSummary, WorldObject, 
 
 ScanKey = tuple[float, str]
 _HANDOVER_GATE = 13.8  # chi-square 99.9 % for 2 degrees of freedom; ids move only this close
-_SAME_OBJECT_GATE = 1.0  # squared Mahalanobis distance: two lineages' estimates coincide
+_SAME_OBJECT_GATE = 1.0  # 4 x Bhattacharyya distance: two lineages' estimates coincide
 _GROUPING_FLOOR = 1e-3  # lineages less likely than this are not grouped
 
 
@@ -1018,8 +1019,7 @@ class WorldModel:
             pair_delta = delta[aa, bb]
         if aa.size == 0:
             return marginals  # no two estimates near each other: each is one object
-        d2 = mahalanobis_squared(pair_delta, P[aa] + P[bb])
-        close = d2 <= _SAME_OBJECT_GATE
+        close = _coinciding(pair_delta, P[aa], P[bb])
         if not close.any():
             return marginals
         for a, b in zip(aa[close].tolist(), bb[close].tolist(), strict=True):
@@ -1299,6 +1299,31 @@ def _remap_classes(state: MHFState, old: tuple[str, ...], new: tuple[str, ...]) 
 
     tracks = {key: remap(track) for key, track in state.tracks.items()}
     return replace(state, tracks=tracks)
+
+
+def _coinciding(delta: FloatArray, Pa: FloatArray, Pb: FloatArray) -> npt.NDArray[np.bool_]:
+    """Whether pairs of Gaussian position estimates are one object: their
+    Bhattacharyya distance is at most ``_SAME_OBJECT_GATE / 4``.
+
+    .. math::
+       4 D_B = \\delta^T (P_a + P_b)^{-1} \\delta
+               + 2 \\ln \\frac{\\det \\tfrac{1}{2}(P_a + P_b)}{\\sqrt{\\det P_a \\det P_b}}
+
+    With equal covariances the log term is 0 and this is the Mahalanobis test of the
+    means. The log term (>= 0) keeps an estimate that has lost its object (a covariance
+    of tens of metres, under which every estimate nearby is "within the gate") from
+    being taken for a well-localised one: they are not the same distribution.
+
+    ``delta`` ``(M, d)``: ``x_a - x_b``; ``Pa``, ``Pb`` ``(M, d, d)``.
+    """
+    total = Pa + Pb
+    d2 = mahalanobis_squared(delta, total)
+    _, log_det_mean = np.linalg.slogdet(0.5 * total)
+    _, log_det_a = np.linalg.slogdet(Pa)
+    _, log_det_b = np.linalg.slogdet(Pb)
+    spread = 2.0 * log_det_mean - log_det_a - log_det_b  # 2 ln(det S / sqrt(det Pa det Pb))
+    result: npt.NDArray[np.bool_] = d2 + spread <= _SAME_OBJECT_GATE
+    return result
 
 
 def _unique_labels(objects: list[WorldObject]) -> list[WorldObject]:

@@ -189,7 +189,7 @@ class MultipleHypothesisFilter:
         inside = predicted.inside_region(self.region)
         f = self.class_rates(predicted.tracks)
         if observed is not None and self.observed_rates:
-            f = f * observed.covered(predicted.position, self.sensor_reach, start)
+            f = f * observed.covered(predicted.position, self.sensor_reach, start, end)
             if excess:
                 f = observed.over(
                     [t.lineage for t in predicted.tracks],

@@ -82,12 +82,33 @@ DISCOUNT = 0.98
 
 @dataclass(frozen=True, slots=True)
 class SourceClock:
-    """When a source last scanned, its mean interval between scans (s), and where its
-    sensor was at that scan (``None``: its detections did not say)."""
+    """When a source last scanned, its mean interval between scans (s), where its
+    sensor was at that scan (``None``: its detections did not say), and how fast the
+    sensor moved between its last two scans (m/s; 0 for a sensor that stands still
+    or has given one position so far)."""
 
     last_time: float
     interval: float | None = None
     position: tuple[float, ...] | None = None
+    speed: float = 0.0
+
+    def in_view_until(self, distances: FloatArray, reach: float) -> FloatArray:
+        """Until when objects ``distances`` (m) from the sensor's last position are
+        surely in its view (``-inf``: not in it).
+
+        The last position holds for one mean interval, when the next scan is due.
+        Past it, a silent source may have moved on at its speed in any direction, so
+        only objects within ``reach - speed * (t - last_time - interval)`` are surely
+        in view: a patrolling robot whose detector reports nothing in some frames
+        does not deny what it has left behind. A sensor that stands still keeps its
+        view.
+        """
+        due = self.last_time + (self.interval or 0.0)
+        inside = distances <= reach
+        if self.speed <= 0.0:
+            return np.where(inside, np.inf, -np.inf)
+        result: FloatArray = np.where(inside, due + (reach - distances) / self.speed, -np.inf)
+        return result
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,35 +150,49 @@ class ObservedRates:
         prior = 0.5 if class_rate is None else min(1.0, class_rate * clock.interval)
         return counts.detection_probability(prior) / clock.interval
 
-    def covered(self, positions: FloatArray, reach: float | None, time: float) -> FloatArray:
-        """``(N,)``: 1 where an object at ``positions`` ``(N, d)`` may be seen by some
-        source at ``time``, else 0 (the class rate applies only there).
+    def covered(
+        self, positions: FloatArray, reach: float | None, start: float, end: float | None = None
+    ) -> FloatArray:
+        """``(N,)``: the part of ``[start, end]`` (default: the instant ``start``) in
+        which an object at ``positions`` ``(N, d)`` is surely in some source's view
+        (the class rate applies only then).
 
         Coverage is known only when every detector has a ``range`` (``reach``: the
-        largest) and every source that scanned within :data:`STALE_INTERVALS` of its
-        intervals gave its sensor position: then an object farther than ``reach`` from
-        every such source's last position is out of view. Otherwise every object may
-        be seen (all ones).
+        largest) and every source gave its sensor position (one without a position
+        that scanned within :data:`STALE_INTERVALS` of its intervals makes every
+        object count as seen: all ones, as before any source has scanned twice). A
+        source that gave positions never goes stale: standing still, it keeps its view
+        (silence there means it saw nothing); moving, its view shrinks to nothing.
+        Then an object is in a source's view while it is within ``reach`` of the
+        source's last position, shrinking once the source is overdue at the speed it
+        moved (:meth:`SourceClock.in_view_until`); in nobody's view, it gets 0.
         """
         count = positions.shape[0]
         everywhere = np.ones(count)
         if reach is None or count == 0:
             return everywhere
-        sensors = []
+        clocks = []
         for clock in self.sources.values():
-            stale = STALE_INTERVALS * (clock.interval or 0.0)
-            if clock.interval is None or time - clock.last_time > stale:
+            if clock.interval is None:
                 continue
             if clock.position is None:
-                return everywhere
-            sensors.append(clock.position)
-        if not sensors:
+                if start - clock.last_time <= STALE_INTERVALS * clock.interval:
+                    return everywhere
+                continue
+            clocks.append(clock)
+        if not clocks:  # no source has scanned twice yet
             return everywhere
-        at = np.asarray(sensors, dtype=float)[:, : positions.shape[1]]
-        offset = positions[:, None, :] - at[None, :, :]
-        near = np.einsum("nsd,nsd->ns", offset, offset) <= reach * reach
-        result: FloatArray = near.any(axis=1).astype(float)
-        return result
+        until = np.full(count, -np.inf)
+        for clock in clocks:
+            at = np.asarray(clock.position, dtype=float)[: positions.shape[1]]
+            offset = positions[:, : at.shape[0]] - at
+            distances = np.sqrt(np.einsum("nd,nd->n", offset, offset))
+            until = np.maximum(until, clock.in_view_until(distances, reach))
+        if end is None or end <= start:
+            result: FloatArray = (until >= start).astype(float)
+            return result
+        fraction: FloatArray = np.clip((until - start) / (end - start), 0.0, 1.0)
+        return fraction
 
     def from_stream(
         self,
@@ -318,9 +353,13 @@ class ObservedRates:
                 if clock.interval is None
                 else (1.0 - INTERVAL_WEIGHT) * clock.interval + INTERVAL_WEIGHT * step
             )
-            sources[source] = SourceClock(time, interval, position)
+            speed = clock.speed
+            if position is not None and clock.position is not None:
+                moved = np.subtract(position, clock.position)
+                speed = float(np.sqrt(moved @ moved)) / step
+            sources[source] = SourceClock(time, interval, position, speed)
         else:
-            sources[source] = SourceClock(clock.last_time, clock.interval, position)
+            sources[source] = SourceClock(clock.last_time, clock.interval, position, clock.speed)
         streams = dict(self.streams)
 
         def class_of(lineage: int) -> str:

@@ -163,8 +163,28 @@ def test_the_class_rate_applies_only_where_some_sensor_reaches() -> None:
     unknown = rates.after_scan("c", 0.4, {"camera": [3]}, {}, {1, 2, 3})
     unknown = unknown.after_scan("c", 0.5, {"camera": [3]}, {}, {1, 2, 3})
     assert unknown.covered(positions, 3.0, 0.5).tolist() == [1.0, 1.0, 1.0]
-    # a source silent for many of its intervals no longer counts
-    assert rates.covered(positions, 3.0, 5.0).tolist() == [1.0, 1.0, 1.0]
+    # sensors that stand still keep their view while silent (they saw nothing)
+    assert rates.covered(positions, 3.0, 5.0).tolist() == [1.0, 0.0, 1.0]
+    # a source without a position that went silent for many of its intervals no
+    # longer makes every object count as seen
+    assert unknown.covered(positions, 3.0, 5.0).tolist() == [1.0, 0.0, 1.0]
+
+
+def test_a_silent_moving_sensor_covers_what_it_surely_still_sees() -> None:
+    """A sensor that moved at 1 m/s and then says nothing: its last position holds for
+    one interval (0.1 s); after it the sensor may be anywhere within 1 m/s of it, so
+    only objects within ``reach - 1 m/s x overdue`` are surely in view."""
+    rates = ObservedRates()
+    for k in range(5):
+        rates = rates.after_scan("robot", k / 10, {"scanner": [1]}, {}, {1}, (k / 10, 0.0))
+    last = 0.4
+    positions = np.array([[last + 2.5, 0.0], [last + 2.9, 0.0], [last + 3.5, 0.0]])
+    assert rates.covered(positions, 3.0, last + 0.1).tolist() == [1.0, 1.0, 0.0]
+    # 0.3 s overdue: surely in view within 2.7 m only
+    assert rates.covered(positions, 3.0, last + 0.4).tolist() == [1.0, 0.0, 0.0]
+    # over an interval: the part of it in which each was surely in view
+    fraction = rates.covered(positions, 3.0, last, last + 1.0)
+    assert fraction == pytest.approx([0.6, 0.2, 0.0])
 
 
 def test_a_stream_counts_each_class_at_its_own_rate_from_the_knowledges_prior() -> None:
