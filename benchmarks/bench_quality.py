@@ -127,6 +127,12 @@ def _knowledge(scenario: Scenario) -> Knowledge:
 
 
 def _area(scenario: Scenario) -> float:
+    """The area the peers spread clutter over: the scenario's sensor coverage where it
+    states one (``metadata["coverage_area"]``: one short-range sensor on a robot), else
+    its region."""
+    coverage = scenario.metadata.get("coverage_area")
+    if isinstance(coverage, int | float):
+        return float(coverage)
     return float(np.prod([hi - lo for lo, hi in scenario.region]))
 
 

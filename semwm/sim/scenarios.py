@@ -1249,6 +1249,7 @@ def patrol(
             "gospa_c": 1.0,
             "knowledge_dir": "benchmarks/knowledge",
             "sensor_range": sensor_range,
+            "coverage_area": float(np.pi * sensor_range**2),
             "static_ids": ids[:n_pallets],
             "first_seen": {k: round(v, 6) for k, v in first_seen.items()},
         },
