@@ -39,11 +39,11 @@ from semwm.knowledge.loader import UnknownFormatError, load_document
 from semwm.knowledge.model import KnowledgeDocument
 from semwm.knowledge.problems import KnowledgeError
 from semwm.knowledge.resolve import resolve
-from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.knowledge.shipped import checkout_knowledge_directory, shipped_knowledge_path
 from semwm.sim.ablations import ABLATIONS, ablate
 from semwm.sim.metrics import Metrics
 from semwm.sim.runner import run_scenario, write_run
-from semwm.sim.scenarios import SCENARIOS, make_scenario
+from semwm.sim.scenarios import SCENARIOS, Scenario, make_scenario
 
 
 def format_summary(metrics: Metrics, n_detections: int) -> str:
@@ -128,6 +128,29 @@ def simulate_kick(args: argparse.Namespace) -> int:
     return 0
 
 
+def scenario_knowledge(scenario: Scenario) -> Path:
+    """The knowledge file ``scenario`` is meant for: a shipped one, or one of a folder
+    of the repository (``metadata["knowledge_dir"]``, e.g. ``benchmarks/knowledge``
+    for the datasheet-only files of ``datasheet`` and ``patrol``), looked for in the
+    semwm checkout around the current directory, then next to this source."""
+    folder = scenario.metadata.get("knowledge_dir")
+    if folder is None:
+        return shipped_knowledge_path(scenario.knowledge_file)
+    roots = [Path(__file__).resolve().parents[2]]
+    checkout = checkout_knowledge_directory()
+    if checkout is not None:
+        roots.insert(0, checkout.parent)
+    for root in roots:
+        path = root / str(folder) / scenario.knowledge_file
+        if path.is_file():
+            return path
+    raise CommandError(
+        f"scenario {scenario.name} runs on {folder}/{scenario.knowledge_file} of a semwm "
+        "checkout, which the installed package does not carry: run it inside a checkout, "
+        "or give --knowledge FILE"
+    )
+
+
 def simulate(args: argparse.Namespace) -> int:
     """Run ``semwm simulate``; returns the exit status."""
     if args.name == "kick":
@@ -142,7 +165,7 @@ def simulate(args: argparse.Namespace) -> int:
         else:
             sizes["duration"] = args.duration
     scenario = make_scenario(args.name, args.seed, **sizes)
-    path = args.knowledge or shipped_knowledge_path(scenario.knowledge_file)
+    path = args.knowledge or scenario_knowledge(scenario)
     ablations = list(dict.fromkeys(args.no_knowledge))  # each once, in the order given
     document = ablate(_load(path), ablations)
     try:

@@ -141,6 +141,23 @@ def test_simulate_with_a_missing_or_broken_knowledge_file(
     )
 
 
+@pytest.mark.parametrize("name", ["datasheet", "patrol"])
+def test_simulate_a_variant_with_its_datasheet_knowledge(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, name: str
+) -> None:
+    """Their knowledge files are in benchmarks/knowledge/ of the checkout, not shipped
+    (``semwm simulate datasheet`` used to stop with a FileNotFoundError traceback)."""
+    out_dir = tmp_path / name
+    status, out, err = run(
+        capsys, "simulate", name, "--duration", "5", "--out", str(out_dir), "--no-progress"
+    )
+    assert status == 0, err
+    metrics = json.loads((out_dir / "metrics.json").read_text(encoding="utf-8"))
+    assert Path(metrics["knowledge"]).name == f"{name}.yaml"
+    assert Path(metrics["knowledge"]).parent.name == "knowledge"
+    assert "GOSPA" in out
+
+
 def test_default_out_gives_every_variant_its_own_folder() -> None:
     assert default_out("sim2", 0, [], None) == Path("runs/sim2-seed0")
     assert default_out("sim2", 0, ["door-relation"], None) == Path(
