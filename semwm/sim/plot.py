@@ -207,18 +207,30 @@ def _last_inside(xs: np.ndarray, ys: np.ndarray, limits: Limits) -> int:
     return int(inside[-1]) if inside.size else len(xs) - 1
 
 
+def with_gaps(rows: np.ndarray, step: float) -> np.ndarray:
+    """``rows`` ``(time, x, y)`` with a NaN row wherever the track was absent from the
+    world for a frame or more (consecutive times more than 1.5 ``step`` apart), so a
+    line drawn through them breaks there instead of joining distant points."""
+    if len(rows) < 2 or not step > 0.0:
+        return rows
+    gaps = np.flatnonzero(np.diff(rows[:, 0]) > 1.5 * step) + 1
+    return np.insert(rows, gaps, np.nan, axis=0) if gaps.size else rows
+
+
 def _draw_world(
     ax: Any,
     tracks: dict[int, Track],
     colours: dict[str, Any],
     paper_style: bool,
     limits: Limits,
+    step: float = 0.0,
 ) -> list[Line2D]:
     handles: dict[str, Line2D] = {}
     for track_id, track in sorted(tracks.items()):
         colour = "k" if paper_style else colours[track.cls]
+        broken = with_gaps(track.rows, step)
+        ax.plot(broken[:, 1], broken[:, 2], "-", lw=1.0, color=colour, zorder=3)
         xs, ys = track.rows[:, 1], track.rows[:, 2]
-        ax.plot(xs, ys, "-", lw=1.0, color=colour, zorder=3)
         end = _last_inside(xs, ys, limits)
         ax.plot(xs[end : end + 1], ys[end : end + 1], "o", ms=2.5, color=colour, zorder=3)
         ax.annotate(
@@ -280,7 +292,9 @@ def draw_run(scenario: Scenario, worlds: Sequence[WorldState], metrics: Metrics)
     handles = [_draw_detections(ax, scenario)]
     handles += _draw_truth(ax, paths, colours)
     limits = ((x_lo - 0.5, x_hi + 0.5), (y_lo - 0.5, y_hi + 0.5))
-    handles += _draw_world(ax, tracks, colours, paper_style, limits)
+    times = np.array([frame.time for frame in scenario.truth])
+    step = float(np.median(np.diff(times))) if len(times) > 1 else 0.0
+    handles += _draw_world(ax, tracks, colours, paper_style, limits, step)
 
     door = scenario.metadata.get("door")
     if isinstance(door, tuple | list):

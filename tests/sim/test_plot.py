@@ -90,3 +90,12 @@ def test_robocup_detections_are_subsampled_and_every_class_has_a_legend_entry(
         assert f"truth: {cls} path (square: start)" in legend
     path = plot_run(result.scenario, result.worlds, result.metrics, tmp_path / "plot.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_world_track_line_breaks_where_the_object_was_not_in_the_world() -> None:
+    rows = np.array([[0.0, 0.0, 0.0], [0.1, 1.0, 0.0], [0.5, 9.0, 9.0], [0.6, 9.5, 9.0]])
+    broken = plot.with_gaps(rows, 0.1)
+    assert broken.shape == (5, 3)
+    assert np.isnan(broken[2]).all()  # absent at 0.2-0.4 s: no line from (1, 0) to (9, 9)
+    assert np.array_equal(broken[[0, 1, 3, 4]], rows)
+    assert np.array_equal(plot.with_gaps(rows[:2], 0.1), rows[:2])  # no gap: unchanged
