@@ -122,6 +122,7 @@ class MultipleHypothesisFilter:
         self.factory = FilterFactory(knowledge)
         self.associator = Associator(knowledge, self.factory, self.taxonomy)
         self.ratio = knowledge.world.pruning_ratio
+        self.log_ratio = math.log(self.ratio) if self.ratio > 0.0 else -math.inf
         self.max_hypotheses = knowledge.world.max_hypotheses
         world = knowledge.world
         self.mht = world.association_model == "mht"
@@ -509,6 +510,7 @@ class MultipleHypothesisFilter:
         holders = table.by_label.setdefault(label, set()) if label is not None else set()
         log_clutter = option.log_clutter
         log_or_clutter = log_add(log_clutter, option.new_log)  # the usual "new or clutter"
+        floor = self._update_floor(hypotheses, option, bool(copies))
         born_at: dict[float, int] = {}  # birth weight -> the version born (mht)
         for h in hypotheses:
             tracks = h.tracks
@@ -561,6 +563,8 @@ class MultipleHypothesisFilter:
                     # explanation than the holder, it pays the label error too (the
                     # associator charges objects holding a different label)
                     log_num += self.associator.log_label_error
+                if log_norm + log_num < floor:
+                    continue  # pruned by eq. (3) whatever else is built: no set made
                 child = (tracks - {k}) | {updated.key}
                 if labelled:
                     child = _give_label(child, updated.key, holders, table)
@@ -576,6 +580,30 @@ class MultipleHypothesisFilter:
         if not children:  # nothing can explain it: a knowledge base with no clutter or births
             return tuple(hypotheses)
         return prune(merge(children), self.ratio, self.max_hypotheses)
+
+    def _update_floor(
+        self, hypotheses: Sequence[Hypothesis], option: DetectionOptions, copies: bool
+    ) -> float:
+        """A log weight under which an update child of :meth:`_expand` is pruned by eq.
+        (3) whatever else is built, known before any child is: alpha times a lower bound
+        of the best child's weight (any parent's best update, or the clutter part of its
+        "new object or clutter" child). ``-inf`` where skipping could change a result:
+        only ``mht`` children with no label and no label copies are each a set of objects
+        no other child holds, so a child under the floor has nothing to merge with."""
+        if (
+            not self.mht
+            or self.ratio <= 0.0
+            or copies
+            or option.measurement.label is not None
+            or not hypotheses
+        ):
+            return -math.inf
+        parent = hypotheses[0]
+        best = option.log_clutter
+        existing = option.existing
+        for k in existing.keys() & parent.tracks:
+            best = max(best, existing[k][1])
+        return parent.log_weight + best + self.log_ratio
 
     def _certain_update(
         self, book: _ClusterBook, touched: set[int], option: DetectionOptions, table: _TrackTable
