@@ -653,6 +653,8 @@ def _separated_points(
 ) -> np.ndarray:
     """``n`` uniform points inside ``region`` shrunk by ``margin``, pairwise at least
     ``min_distance`` apart (rejection sampling, bounded)."""
+    if n == 0:
+        return np.zeros((0, len(region)))
     inner: Region = tuple((lo + margin, hi - margin) for lo, hi in region)
     points: list[np.ndarray] = []
     for _ in range(1000 * n):
@@ -1194,7 +1196,7 @@ def patrol(
                 continue
             velocities[i] = offset / distance * speeds[i]
             people[i] = people[i] + velocities[i] * dt
-        positions = np.vstack([pallets, people]) if n_pallets + n_people else np.zeros((0, 2))
+        positions = np.vstack([pallets, people])
         speeds_now = np.vstack([np.zeros((n_pallets, 2)), velocities])
         truth.append(
             TruthFrame(

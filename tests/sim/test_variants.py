@@ -197,3 +197,11 @@ def test_patrol_reports_only_within_range_of_the_moving_sensor() -> None:
             d.time == t and np.hypot(*np.subtract(d.position, real.position)) < 0.5
             for d in s.detections
         )
+
+
+@pytest.mark.parametrize(("pallets", "people"), [(0, 2), (3, 0), (0, 0)])
+def test_patrol_with_no_pallets_or_no_people(pallets: int, people: int) -> None:
+    s = patrol(np.random.default_rng(0), duration=5.0, n_pallets=pallets, n_people=people)
+    assert all(len(f.objects) == pallets + people for f in s.truth)
+    assert s.metadata["static_ids"] == [f"pallet{i + 1}" for i in range(pallets)]
+    assert {d.cls for d in s.detections} <= {"Pallet", "Person"}  # false positives only
