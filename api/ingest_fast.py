@@ -19,9 +19,13 @@ read. ``tests/api/test_ingest_fast.py`` holds the two paths to the same answers.
 
 from __future__ import annotations
 
+import asyncio
+import contextvars
+import functools
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, TypeVar
 
-import anyio.to_thread
 from starlette.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -33,6 +37,14 @@ from api.service import COMMIT_HEADER, WorldService
 PATH = "/detections"
 _KEY_HEADER = b"idempotency-key"
 _MALFORMED = "\0malformed"  # no header value can be this (NUL is not allowed in one)
+_T = TypeVar("_T")
+
+_INGEST_THREADS = ThreadPoolExecutor(max_workers=16, thread_name_prefix="semwm-ingest")
+"""Where accepted batches are applied, off the event loop. One hand-over to a thread and
+back costs about 50-90 µs this way against 105-140 µs with ``anyio.to_thread.run_sync``
+(its capacity limiter and task machinery; uvloop, a 2-core x86_64 box, 15 x 500 calls
+of a no-op each, interleaved). Posts one at a time reuse one idle thread; concurrent
+ones (up to 16, a team's robots) each wait at the world's time-ordered lock as before."""
 
 
 class FastIngest:
@@ -61,9 +73,7 @@ class FastIngest:
             await self.app(scope, _raising(error), send)
             return
         try:
-            committed = await anyio.to_thread.run_sync(
-                apply_json, self.service(), raw, self.max_batch, key
-            )
+            committed = await _in_worker(apply_json, self.service(), raw, self.max_batch, key)
         except ApiError as refusal:  # nothing was applied: the route's error answer
             answer = JSONResponse(status_code=refusal.status, content=refusal.body())
             await answer(scope, receive, send)
@@ -83,6 +93,14 @@ class FastIngest:
             headers.append((b"idempotent-replayed", b"true"))
         await send({"type": "http.response.start", "status": 200, "headers": headers})
         await send({"type": "http.response.body", "body": body})
+
+
+async def _in_worker(function: Callable[..., _T], *args: Any) -> _T:
+    """``function(*args)`` in an ingest thread, with this request's context (its request
+    id in the log lines the service writes)."""
+    context = contextvars.copy_context()
+    call = functools.partial(context.run, function, *args)
+    return await asyncio.get_running_loop().run_in_executor(_INGEST_THREADS, call)
 
 
 def _idempotency_key(scope: Scope) -> str | None:

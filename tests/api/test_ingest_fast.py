@@ -118,3 +118,24 @@ def test_the_fast_path_answers_as_the_route(case: str, monkeypatch: pytest.Monke
         assert any(status >= 400 for status in statuses)
     if case == "too large a body":
         assert statuses == [413] and not taken  # the guard stopped it while it was read
+
+
+def test_batches_are_applied_in_a_worker_thread_with_the_request_context() -> None:
+    """The fast path leaves the event loop for the world's work and carries the request's
+    context there (its request id reaches the log lines the service writes)."""
+    import asyncio
+    import threading
+
+    from api.logs import request_id_var
+
+    def seen() -> tuple[str | None, str]:
+        return request_id_var.get(), threading.current_thread().name
+
+    async def post() -> tuple[str | None, str]:
+        request_id_var.set("req-42")
+        return await api.ingest_fast._in_worker(seen)
+
+    request_id, thread = asyncio.run(post())
+    assert request_id == "req-42"
+    assert thread.startswith("semwm-ingest")
+    assert thread != threading.current_thread().name
