@@ -76,6 +76,16 @@ def _first_order_q(spec: Any) -> float | None:
     return None
 
 
+def clutter_area(scenario: Any) -> float:
+    """The area (m^2) the peers spread one scan's clutter over: the sensor coverage of
+    one source where the scenario states it (``metadata["coverage_area"]``: a robot's
+    sensor disc, as its clutter is drawn), else the scenario's region."""
+    coverage = scenario.metadata.get("coverage_area")
+    if isinstance(coverage, int | float):
+        return float(coverage)
+    return float(np.prod([hi - lo for lo, hi in scenario.region]))
+
+
 def tuning_from_knowledge(knowledge: Knowledge, *, scan_rate: float, area: float) -> Tuning:
     """The peers' tuning for ``knowledge``: same R and q as semwm's classes."""
     qs: list[float] = []

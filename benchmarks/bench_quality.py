@@ -45,6 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from baselines import (
     StoneSoupTracker,
     TrackerTimeout,
+    clutter_area,
     fmt,
     machine_info,
     tuning_from_knowledge,
@@ -126,22 +127,12 @@ def _knowledge(scenario: Scenario) -> Knowledge:
     return knowledge_for(scenario.knowledge_file, None if directory is None else str(directory))
 
 
-def _area(scenario: Scenario) -> float:
-    """The area the peers spread clutter over: the scenario's sensor coverage where it
-    states one (``metadata["coverage_area"]``: one short-range sensor on a robot), else
-    its region."""
-    coverage = scenario.metadata.get("coverage_area")
-    if isinstance(coverage, int | float):
-        return float(coverage)
-    return float(np.prod([hi - lo for lo, hi in scenario.region]))
-
-
 def _factory(
     tracker: str, scenario: Scenario, knowledge: Knowledge, rate: float, limit: float
 ) -> Callable[[Knowledge], WorldModelLike]:
     if tracker == "semwm":
         return lambda k: TimeLimited(default_world_model(k), limit)
-    tuning = tuning_from_knowledge(knowledge, scan_rate=rate, area=_area(scenario))
+    tuning = tuning_from_knowledge(knowledge, scan_rate=rate, area=clutter_area(scenario))
     mode = {"stonesoup_gnn": "gnn", "stonesoup_jpda": "jpda"}[tracker]
     return lambda k: StoneSoupTracker(tuning, mode, time_limit=limit)
 

@@ -156,11 +156,11 @@ def _timed_run(
         WorldModel(knowledge)  # lazy imports outside the measured calls
         build: Any = WorldModel
     else:
-        from baselines import StoneSoupTracker, tuning_from_knowledge
-        from bench_trackers import FULL, _area
+        from baselines import StoneSoupTracker, clutter_area, tuning_from_knowledge
+        from bench_trackers import FULL
 
         rate = FULL[name][1]
-        tuning = tuning_from_knowledge(knowledge, scan_rate=rate, area=_area(scenario.region))
+        tuning = tuning_from_knowledge(knowledge, scan_rate=rate, area=clutter_area(scenario))
         mode = tracker.removeprefix("stonesoup_")
 
         def build(k: Any) -> Any:

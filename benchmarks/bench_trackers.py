@@ -30,6 +30,7 @@ from baselines import (
     StoneSoupTracker,
     TrackerTimeout,
     add_output_arguments,
+    clutter_area,
     fmt,
     machine_info,
     tuning_from_knowledge,
@@ -54,10 +55,6 @@ QUICK: dict[str, tuple[dict[str, Any], float]] = {
     "sim2": ({}, 10.0),
     "robocup": ({"duration": 1.0}, 30.0),
 }
-
-
-def _area(region: Any) -> float:
-    return float(np.prod([hi - lo for lo, hi in region]))
 
 
 def _factory(name: str, tuning: Any, time_limit: float) -> Callable[[Any], Any] | None:
@@ -137,7 +134,7 @@ def run(
     for name, (sizes, rate) in config.items():
         scenario0 = make_scenario(name, 0, **sizes)
         knowledge = load_knowledge(shipped_knowledge_path(scenario0.knowledge_file))
-        tuning = tuning_from_knowledge(knowledge, scan_rate=rate, area=_area(scenario0.region))
+        tuning = tuning_from_knowledge(knowledge, scan_rate=rate, area=clutter_area(scenario0))
         entry: dict[str, Any] = {
             "sizes": sizes,
             "knowledge": scenario0.knowledge_file,

@@ -580,6 +580,7 @@ def robocup(
             "n_opponents": n_opponents,
             "occluded_detections": hidden,
             "sensor_range": sensor_range,
+            "coverage_area": float(np.pi * sensor_range**2),  # one observer's clutter disc
         },
     )
 
