@@ -20,6 +20,7 @@ false :math:`c^p/2 \\cdot` (false estimates); with ``p = 1`` they add up to the 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import asdict, dataclass, field
 
@@ -143,6 +144,48 @@ class Metrics:
 
     def to_dict(self) -> dict[str, object]:
         return asdict(self)
+
+
+def unobserved_floor(
+    frames: Sequence[tuple[float, Sequence[Point]]],
+    reports: Sequence[tuple[float, Sequence[float]]],
+    *,
+    c: float,
+    p: float = 1.0,
+) -> float:
+    """The mean GOSPA every tracker pays for objects nothing has reported yet.
+
+    A truth object counts as *unobserved* in a frame (``(time, truth points)``) until a
+    report (``(time, position)``: a detection, clutter included) at or before that
+    time has come within ``c / 2`` of it (an estimate there would cost less than the
+    miss); a report is compared with the truth frame nearest to it in time. Each
+    unobserved object is missed, ``c^p / 2``, whatever a tracker does (unless one of
+    its estimates lies within ``c / 2`` of an object by chance), so this is the part of
+    a mean GOSPA (``p = 1``: over the same frames) that no tracker can remove: a
+    ratio of two trackers' GOSPA is pulled towards 1 by it.
+    """
+    if c <= 0.0 or p < 1.0:
+        raise ValueError(f"GOSPA needs c > 0 and p >= 1; got c={c}, p={p}")
+    if not frames:
+        return 0.0
+    times = np.array([time for time, _ in frames])
+    first_seen: dict[Hashable, float] = {}
+    reach = c / 2.0
+    for time, position in reports:
+        k = int(np.searchsorted(times, time))
+        if k == len(times) or (k > 0 and time - times[k - 1] <= times[k] - time):
+            k -= 1
+        for point in frames[k][1]:
+            n = min(len(point.position), len(position))
+            near = math.dist(point.position[:n], tuple(position)[:n]) <= reach
+            if near and time < first_seen.get(point.id, math.inf):
+                first_seen[point.id] = time
+    half = float(c**p) / 2.0
+    missed = [
+        sum(1 for point in truth if first_seen.get(point.id, math.inf) > time)
+        for time, truth in frames
+    ]
+    return half * float(np.mean(missed))
 
 
 def count_id_switches(assignments: Sequence[dict[Hashable, Hashable]]) -> int:

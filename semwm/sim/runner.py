@@ -24,7 +24,7 @@ from tqdm import tqdm
 from semwm.detection import Detection
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
-from semwm.sim.metrics import Metrics, Point, compute_metrics
+from semwm.sim.metrics import Metrics, Point, compute_metrics, unobserved_floor
 from semwm.sim.scenarios import Scenario, TruthFrame
 from semwm.world_types import WorldObject, WorldState
 
@@ -143,7 +143,7 @@ def run_scenario(
                 bar.update(len(scan))
                 next_scan += 1
             worlds.append(model.world(time=frame.time))
-    c = gospa_c if gospa_c is not None else float(str(scenario.metadata.get("gospa_c", 1.0)))
+    c = gospa_c if gospa_c is not None else scenario_gospa_c(scenario)
     metrics = compute_metrics(
         [truth_points(f) for f in scenario.truth],
         [world_points(w) for w in worlds],
@@ -153,6 +153,22 @@ def run_scenario(
     )
     metrics = replace(metrics, time_per_detection=_timing(seconds, sizes))
     return RunResult(scenario, knowledge, worlds, metrics, seconds, sizes)
+
+
+def scenario_gospa_c(scenario: Scenario) -> float:
+    """The scenario's GOSPA cut-off ``metadata["gospa_c"]`` (m), else 1 m."""
+    return float(str(scenario.metadata.get("gospa_c", 1.0)))
+
+
+def scenario_floor(scenario: Scenario, gospa_c: float | None = None, gospa_p: float = 1.0) -> float:
+    """:func:`semwm.sim.metrics.unobserved_floor` of a scenario: the mean GOSPA (scored as
+    :func:`run_scenario` scores) that no tracker can avoid on its detections."""
+    return unobserved_floor(
+        [(f.time, truth_points(f)) for f in scenario.truth],
+        [(d.time, d.position) for d in scenario.detections],
+        c=gospa_c if gospa_c is not None else scenario_gospa_c(scenario),
+        p=gospa_p,
+    )
 
 
 def metrics_document(result: RunResult, ablations: Sequence[str] = ()) -> dict[str, object]:
