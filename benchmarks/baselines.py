@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from semwm.detection import Detection
-from semwm.knowledge.model import Knowledge
+from semwm.knowledge.model import IMMFilterSpec, Knowledge
 from semwm.world_types import WorldObject, WorldState
 
 EPOCH = dt.datetime(2024, 1, 1)
@@ -102,8 +102,8 @@ def tuning_from_knowledge(knowledge: Knowledge, *, scan_rate: float, area: float
         if q is not None:
             qs.append(q)
         else:
-            models = getattr(c.filter, "models", None) or (c.filter.model,)
-            zeroth.append(float(np.asarray(models[0].system_noise)[0][0]))
+            first = c.filter.models[0] if isinstance(c.filter, IMMFilterSpec) else c.filter.model
+            zeroth.append(float(np.asarray(first.system_noise)[0][0]))
         ivv.append(float(np.asarray(c.initial_velocity_covariance)[0][0]))
         if c.max_position_variance is not None:
             mpv.append(float(c.max_position_variance))

@@ -43,7 +43,9 @@ JITTER = 0.02
 READER_HZ = 10.0
 
 
-def team_sim(seeds: list[int], duration: float, holds: list[float], rounds: int) -> list[dict]:
+def team_sim(
+    seeds: list[int], duration: float, holds: list[float], rounds: int
+) -> list[dict[str, Any]]:
     knowledge = load_knowledge(shipped_knowledge_path("robocup.yaml"))
     configs: list[tuple[str, Network]] = [("in order (no latency)", Network())]
     configs += [(f"latency, hold {h:g} s", Network(0.0, LATENCY, hold=WINDOW, model_hold=h))
@@ -83,7 +85,7 @@ def _stream(seconds: float, jitter: float, seed: int = 0) -> list[list[dict[str,
     rngs = [np.random.default_rng(robot) for robot in range(ROBOTS)]
     late = np.random.default_rng(100 + seed)
     seen = [[OBJECTS[(2 * r + k) % len(OBJECTS)] for k in range(PER_BATCH)] for r in range(ROBOTS)]
-    arrivals = []
+    arrivals: list[tuple[float, int, list[dict[str, Any]]]] = []
     for tick in range(int(seconds * RATE_HZ)):
         for r in range(ROBOTS):
             t = tick / RATE_HZ + r * 1e-3
@@ -116,7 +118,9 @@ def _stream_once(
     return cpu / (len(batches) - warmup), world
 
 
-def team_stream(seconds: float, holds: list[float], rounds: int, warmup: int = 150) -> list[dict]:
+def team_stream(
+    seconds: float, holds: list[float], rounds: int, warmup: int = 150
+) -> list[dict[str, Any]]:
     configs = [("in order, no jitter", 0.0, 0.0)]
     configs += [(f"±{JITTER * 1e3:g} ms jitter, hold {h:g} s", JITTER, h) for h in holds]
     streams = {j: _stream(seconds, j) for j in {c[1] for c in configs}}

@@ -215,12 +215,12 @@ def over_http(case: Case, server: Server, client: Client) -> dict[str, float]:
     server_cpu = server.cpu_seconds() - server_cpu
     after = _metrics(client)
     apply = after["semwm_ingest_apply_seconds_sum"] - before["semwm_ingest_apply_seconds_sum"]
-    server = after["semwm_ingest_latency_seconds_sum"] - before["semwm_ingest_latency_seconds_sum"]
+    inside = after["semwm_ingest_latency_seconds_sum"] - before["semwm_ingest_latency_seconds_sum"]
     return {
         "http": total,
         "apply": apply,
-        "server": server - apply,
-        "client": total - server,
+        "server": inside - apply,
+        "client": total - inside,
         "http_cpu": server_cpu + client_cpu,
     }
 

@@ -77,7 +77,7 @@ def run(seeds: list[int], duration: float) -> dict[str, Any]:
     knowledge = load_knowledge(shipped_knowledge_path("robocup.yaml"))
     rows = []
     for name, levels, network, strategy, options in CONFIGS:
-        runs = []
+        runs: list[dict[str, Any]] = []
         for seed in seeds:
             scenario = make_scenario("robocup", seed, duration=duration)
             team = run_team(

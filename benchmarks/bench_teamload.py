@@ -195,7 +195,8 @@ def run(seconds: float, hold: float = 0.0, order_tolerance: float | None = None)
 def _mean_ms(metrics: str, histogram: str) -> float:
     """Mean (ms) of a Prometheus histogram in ``metrics``: its _sum over its _count."""
     count = _metric(metrics, f"{histogram}_count")
-    return round(1000.0 * _metric(metrics, f"{histogram}_sum") / count, 2) if count else 0.0
+    total = _metric(metrics, f"{histogram}_sum")
+    return round(1000.0 * total / count, 2) if count and total is not None else 0.0
 
 
 def main() -> None:
