@@ -32,12 +32,23 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from api.errors import ApiError
 from api.routes.detections import apply_json
 from api.schemas import MAX_KEY, IngestOut
-from api.service import COMMIT_HEADER, WorldService
+from api.service import COMMIT_HEADER, Committed, WorldBusy, WorldService
+from semwm import IngestResult
 
 PATH = "/detections"
 _KEY_HEADER = b"idempotency-key"
 _MALFORMED = "\0malformed"  # no header value can be this (NUL is not allowed in one)
 _T = TypeVar("_T")
+
+INLINE_BODY = 4096
+"""Bodies up to this size (about 20 detections) are applied on the event loop when the
+world's lock is free, no hook (the journal) writes and the body is plainly valid; else
+in an ingest thread. The hand-over to a thread and back costs a small scan 250-400 µs
+on a 2-core x86_64 box (the world model's data is in the other core's cache: the scan
+itself runs 10-35 % slower there), as much as the scan. On the loop, the scan delays
+the other requests by its own time, at most: every request that reads or changes the
+world waits for its lock anyway; only /health, /metrics and static pages wait where
+they would not have."""
 
 _INGEST_THREADS = ThreadPoolExecutor(max_workers=16, thread_name_prefix="semwm-ingest")
 """Where accepted batches are applied, off the event loop. One hand-over to a thread and
@@ -73,7 +84,7 @@ class FastIngest:
             await self.app(scope, _raising(error), send)
             return
         try:
-            committed = await _in_worker(apply_json, self.service(), raw, self.max_batch, key)
+            committed = await self._apply(self.service(), raw, key)
         except ApiError as refusal:  # nothing was applied: the route's error answer
             answer = JSONResponse(status_code=refusal.status, content=refusal.body())
             await answer(scope, receive, send)
@@ -93,6 +104,18 @@ class FastIngest:
             headers.append((b"idempotent-replayed", b"true"))
         await send({"type": "http.response.start", "status": 200, "headers": headers})
         await send({"type": "http.response.body", "body": body})
+
+    async def _apply(
+        self, service: WorldService, raw: bytes, key: str | None
+    ) -> Committed[IngestResult]:
+        """Apply a body: on the event loop when it is small and the world is free (see
+        :data:`INLINE_BODY`), else in an ingest thread."""
+        if len(raw) <= INLINE_BODY and not service.hooks:
+            try:
+                return apply_json(service, raw, self.max_batch, key, wait=False)
+            except WorldBusy:
+                pass  # someone holds the world (or the body needs its full check): wait there
+        return await _in_worker(apply_json, service, raw, self.max_batch, key)
 
 
 async def _in_worker(function: Callable[..., _T], *args: Any) -> _T:

@@ -54,6 +54,14 @@ class TimeOrderedLock:
             self.release()  # handed over meanwhile: pass it on
             raise
 
+    def try_acquire(self) -> bool:
+        """Take the lock if nobody holds it (then nobody waits for it either); never wait."""
+        with self._guard:
+            if self._held:
+                return False
+            self._held = True
+            return True
+
     def release(self) -> None:
         with self._guard:
             if not self._held:

@@ -85,6 +85,11 @@ ChangeListener = Callable[[WorldChange], None]
 """Called after each committed change, under the service's lock: keep it short (queue, count).
 Unlike a :class:`ChangeHook` it cannot refuse the change; it only hears of it."""
 
+
+class WorldBusy(Exception):
+    """The world's lock is taken and the caller chose not to wait: nothing was done."""
+
+
 COMMIT_HEADER = "X-Semwm-Commit"
 """The response header numbering accepted changes 1, 2, ... in the order they were applied."""
 
@@ -287,15 +292,22 @@ class WorldService:
     # -- the lock and the commit order ----------------------------------------------------------
 
     @contextmanager
-    def _locked(self, order: float = -math.inf) -> Iterator[None]:
+    def _locked(self, order: float = -math.inf, wait: bool = True) -> Iterator[None]:
         """Hold the world's lock, noting since when (for ``/ready``). Waiters enter by
-        smallest ``order`` (a scan's time; others ``-inf``): :class:`TimeOrderedLock`."""
-        with self._lock.ordered(order):
+        smallest ``order`` (a scan's time; others ``-inf``): :class:`TimeOrderedLock`.
+        ``wait`` false: raise :class:`WorldBusy` at once if the lock is taken."""
+        if wait:
+            self._lock.acquire(order)
+        elif not self._lock.try_acquire():
+            raise WorldBusy
+        try:
             self._busy_since = time.monotonic()
             try:
                 yield
             finally:
                 self._busy_since = None
+        finally:
+            self._lock.release()
 
     @contextmanager
     def _change(self) -> Iterator[None]:
@@ -355,13 +367,15 @@ class WorldService:
         batch: bool,
         key: str | None = None,
         sensor: dict[str, Any] | None = None,
+        wait: bool = True,
     ) -> Committed[IngestResult]:
         """Apply ``detections`` whole, or raise :class:`InvalidError`/:class:`ConflictError`.
 
         ``key`` (an idempotency key): a key seen among the recent ones is answered as
-        the first time, and nothing is applied again.
+        the first time, and nothing is applied again. ``wait`` false: raise
+        :class:`WorldBusy` (nothing applied) rather than wait for the world's lock.
         """
-        with self._locked(self._scan_order(detections, sensor)):
+        with self._locked(self._scan_order(detections, sensor), wait):
             if key is not None and key in self._recent:
                 self._recent.move_to_end(key)
                 earlier = self._recent[key]

@@ -30,7 +30,7 @@ from api.schemas import (
     SensorIn,
     ValidationErrorOut,
 )
-from api.service import COMMIT_HEADER, Committed, WorldService
+from api.service import COMMIT_HEADER, Committed, WorldBusy, WorldService
 from semwm import IngestResult
 
 router = APIRouter(tags=["detections"])
@@ -239,16 +239,25 @@ def decode_body(raw: bytes) -> Any:
 
 
 def apply_json(
-    world: WorldService, raw: bytes, max_batch: int, idempotency_key: str | None = None
+    world: WorldService,
+    raw: bytes,
+    max_batch: int,
+    idempotency_key: str | None = None,
+    wait: bool = True,
 ) -> Committed[IngestResult]:
     """:func:`apply_body` of a body's bytes: one validation of the whole body on the way in.
 
-    Blocks (the world's lock, the world model): call it in a worker thread.
+    Blocks (the world's lock, the world model): call it in a worker thread. ``wait``
+    false: :class:`~api.service.WorldBusy` (nothing applied) if the world's lock is
+    taken, and a body that is not plainly valid raises it too (its problems are
+    collected where waiting is allowed).
     """
     accepted = parse_json(raw, max_batch)
     if accepted is None:
+        if not wait:
+            raise WorldBusy
         return apply_body(world, decode_body(raw), max_batch, idempotency_key)
-    return _ingest(world, accepted, idempotency_key)
+    return _ingest(world, accepted, idempotency_key, wait)
 
 
 def apply_body(
@@ -272,7 +281,7 @@ def apply_body(
 
 
 def _ingest(
-    world: WorldService, accepted: Accepted, idempotency_key: str | None
+    world: WorldService, accepted: Accepted, idempotency_key: str | None, wait: bool = True
 ) -> Committed[IngestResult]:
     if idempotency_key is not None and accepted.batch_id not in (None, idempotency_key):
         raise InvalidError.one(
@@ -280,8 +289,10 @@ def _ingest(
         )
     key = idempotency_key or accepted.batch_id
     if accepted.sensor is not None:
-        return world.ingest(accepted.detections, accepted.batch, key=key, sensor=accepted.sensor)
-    return world.ingest(accepted.detections, accepted.batch, key=key)
+        return world.ingest(
+            accepted.detections, accepted.batch, key=key, sensor=accepted.sensor, wait=wait
+        )
+    return world.ingest(accepted.detections, accepted.batch, key=key, wait=wait)
 
 
 def _loc_order(item: dict[str, Any]) -> tuple[int, str]:

@@ -8,7 +8,10 @@ batches really took the fast path.
 
 from __future__ import annotations
 
+import threading
+import time
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
@@ -102,9 +105,10 @@ def test_the_fast_path_answers_as_the_route(case: str, monkeypatch: pytest.Monke
     taken: list[int] = []
     real = api.ingest_fast.apply_json  # type: ignore[attr-defined]
 
-    def spy(*args: Any) -> Any:
+    def spy(*args: Any, **options: Any) -> Any:
+        answer = real(*args, **options)  # a WorldBusy (tried on the loop) is not counted
         taken.append(1)
-        return real(*args)
+        return answer
 
     monkeypatch.setattr(api.ingest_fast, "apply_json", spy)
     with _servers() as urls:
@@ -139,3 +143,84 @@ def test_batches_are_applied_in_a_worker_thread_with_the_request_context() -> No
     assert request_id == "req-42"
     assert thread.startswith("semwm-ingest")
     assert thread != threading.current_thread().name
+
+
+def _applies(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, bool]]:
+    """Each body the fast path applied: the thread it ran in and whether it could wait
+    for the world (a try on the event loop that found the world busy is not listed)."""
+    seen: list[tuple[str, bool]] = []
+    real = api.ingest_fast.apply_json  # type: ignore[attr-defined]
+
+    def spy(*args: Any, wait: bool = True) -> Any:
+        answer = real(*args, wait=wait)
+        seen.append((threading.current_thread().name, wait))
+        return answer
+
+    monkeypatch.setattr(api.ingest_fast, "apply_json", spy)
+    return seen
+
+
+@contextmanager
+def _serving(service: WorldService) -> Iterator[str]:
+    settings = Settings(knowledge=service.knowledge_path, port=0)
+    app = create_app(settings)
+    app.dependency_overrides[get_world] = _returning(service)
+    with serving(app, settings) as url:
+        yield url
+
+
+def _world() -> WorldService:
+    return WorldService.from_file(ROOT / "knowledge" / "sim1.yaml")
+
+
+def test_a_small_batch_on_a_free_world_is_applied_on_the_event_loop(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """No hand-over to a thread when nobody holds the world; a large body goes to one."""
+    seen = _applies(monkeypatch)
+    large = {"detections": [{**OK, "time": 4.0} for _ in range(100)]}
+    assert len(str(large)) > api.ingest_fast.INLINE_BODY
+    with _serving(_world()) as url, httpx.Client(base_url=url, timeout=20) as http:
+        assert http.post("/detections", json={"detections": [OK]}).status_code == 200
+        assert http.post("/detections", json=large).status_code == 200
+        assert http.get("/health").json()["commit"] == 2
+    assert seen[0] == ("semwm-uvicorn", False)  # serving()'s thread runs the event loop
+    assert seen[1][0].startswith("semwm-ingest") and seen[1][1]
+
+
+def test_while_the_world_is_busy_a_batch_waits_in_a_thread_and_the_loop_keeps_answering(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    seen = _applies(monkeypatch)
+    world = _world()
+    with _serving(world) as url, ThreadPoolExecutor(1) as pool:
+        world._lock.acquire()  # a long change holds the world
+        try:
+            posted = pool.submit(httpx.post, f"{url}/detections", json=OK, timeout=20)
+            time.sleep(0.3)
+            assert not posted.done()  # it waits for the world, in an ingest thread ...
+            health = httpx.get(f"{url}/health", timeout=5)  # ... and the loop is free
+            assert health.status_code == 200 and health.json()["commit"] == 0
+        finally:
+            world._lock.release()
+        assert posted.result().status_code == 200
+    assert len(seen) == 1 and seen[0][0].startswith("semwm-ingest") and seen[0][1]
+
+
+def test_with_a_hook_batches_are_applied_in_a_thread(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A hook (the journal) may write to disk: never on the event loop."""
+    seen = _applies(monkeypatch)
+    world = _world()
+    records: list[Any] = []
+
+    class Recorder:
+        @contextmanager
+        def applying(self, record: Any) -> Iterator[None]:
+            records.append(record)
+            yield
+
+    world.hooks.append(Recorder())
+    with _serving(world) as url:
+        assert httpx.post(f"{url}/detections", json=OK, timeout=20).status_code == 200
+    assert len(records) == 1
+    assert len(seen) == 1 and seen[0][0].startswith("semwm-ingest")

@@ -153,3 +153,17 @@ def test_a_waiter_interrupted_while_waiting_leaves_the_queue(
     assert not lock.locked()  # not handed to the dead waiter
     with lock.ordered(2.0):
         assert lock.locked()
+
+
+def test_try_acquire_takes_a_free_lock_and_never_waits() -> None:
+    lock = TimeOrderedLock()
+    assert lock.try_acquire() and lock.locked()
+    started = time.monotonic()
+    assert not lock.try_acquire()  # taken: refused at once, not queued
+    assert time.monotonic() - started < 0.1 and lock.waiting == 0
+    lock.release()
+    assert not lock.locked()
+    with lock.ordered():
+        assert not lock.try_acquire()
+    assert lock.try_acquire()
+    lock.release()
