@@ -87,7 +87,9 @@ Unlike a :class:`ChangeHook` it cannot refuse the change; it only hears of it.""
 
 
 class WorldBusy(Exception):
-    """The world's lock is taken and the caller chose not to wait: nothing was done."""
+    """Nothing was done, because it would have meant waiting and the caller chose not to:
+    the world's lock is taken (or, for :func:`api.routes.detections.apply_json`, the body
+    needs its full check first). Do it again where waiting is allowed."""
 
 
 COMMIT_HEADER = "X-Semwm-Commit"
