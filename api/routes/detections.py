@@ -288,11 +288,10 @@ def _ingest(
             ("body", "batch_id"), "batch_id differs from the Idempotency-Key header"
         )
     key = idempotency_key or accepted.batch_id
+    options: dict[str, Any] = {} if wait else {"wait": False}  # the default call unchanged
     if accepted.sensor is not None:
-        return world.ingest(
-            accepted.detections, accepted.batch, key=key, sensor=accepted.sensor, wait=wait
-        )
-    return world.ingest(accepted.detections, accepted.batch, key=key, wait=wait)
+        options["sensor"] = accepted.sensor
+    return world.ingest(accepted.detections, accepted.batch, key=key, **options)
 
 
 def _loc_order(item: dict[str, Any]) -> tuple[int, str]:

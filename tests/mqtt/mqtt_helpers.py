@@ -33,9 +33,13 @@ class RecordingService(WorldService):
     applied: list[list[dict[str, Any]]]
 
     def ingest(
-        self, detections: Sequence[dict[str, Any]], batch: bool, key: str | None = None
+        self,
+        detections: Sequence[dict[str, Any]],
+        batch: bool,
+        key: str | None = None,
+        **options: Any,
     ) -> Committed[IngestResult]:
-        result = super().ingest(detections, batch, key=key)
+        result = super().ingest(detections, batch, key=key, **options)
         if not result.replayed:
             self.applied.append([dict(d) for d in detections])
         return result
