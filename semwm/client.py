@@ -11,7 +11,8 @@
 :class:`Client` keeps one HTTP/1.1 connection open (keep-alive): a request then
 costs one round trip on loopback, not a TCP handshake and a new socket. The robot
 keeps stamping its detections with its own clock; the service places them at
-``stamp + offset``. Only the standard library is used (``http.client``, ``urllib``).
+``stamp + offset``. The connection (:mod:`semwm.http_connection`) parses answers
+with ``httptools``, the C parser uvicorn uses; :func:`http_transport` uses ``urllib``.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ import urllib.parse
 import urllib.request
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
+
+from semwm.http_connection import HttpConnection
 
 Transport = Callable[[str, dict[str, Any]], dict[str, Any]]
 
@@ -84,18 +87,19 @@ class Client:
         self.headers = {"content-type": "application/json", "accept": "application/json"}
         if token is not None:
             self.headers["authorization"] = f"Bearer {token}"
-        self._connection: http.client.HTTPConnection | None = None
+        self._connection: HttpConnection | None = None
         self._last_used = 0.0
         self.last_headers: dict[str, str] = {}
         """The headers of the last answer (lower-case names), e.g. ``x-semwm-commit``."""
 
-    def _connect(self) -> http.client.HTTPConnection:
+    def _connect(self) -> HttpConnection:
         now = time.monotonic()
         if self._connection is not None and now - self._last_used > self.idle_reconnect:
             self.close()
         if self._connection is None:
-            kind = http.client.HTTPSConnection if self.https else http.client.HTTPConnection
-            self._connection = kind(self.host, self.port, timeout=self.timeout)
+            self._connection = HttpConnection(
+                self.host, self.port, https=self.https, timeout=self.timeout
+            )
         return self._connection
 
     def request(
@@ -118,9 +122,7 @@ class Client:
         for attempt in (1, 2):
             connection = self._connect()
             try:
-                connection.request(method, self.prefix + path, body, all_headers)
-                response = connection.getresponse()
-                data = response.read()
+                response = connection.request(method, self.prefix + path, body, all_headers)
             except _RETRYABLE:
                 self.close()
                 if attempt == 2 or not again:
@@ -130,10 +132,10 @@ class Client:
                 self.close()
                 raise
             self._last_used = time.monotonic()
-            if response.will_close:
+            if not response.keep_alive:
                 self.close()
-            self.last_headers = {k.lower(): v for k, v in response.getheaders()}
-            answer = json.loads(data) if data else None
+            self.last_headers = dict(response.headers)
+            answer = json.loads(response.body) if response.body else None
             if response.status >= 400:
                 raise ServiceError(response.status, answer)
             return answer
