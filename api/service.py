@@ -385,11 +385,13 @@ class WorldService:
             now = self.clock()
             try:
                 with self._sources_lock:
+                    in_order = self._model.hold == 0
                     placement = self.sources.place(
                         list(detections),
                         now,
-                        newest=self._model.processed_time if self._model.hold == 0 else None,
+                        newest=self._model.processed_time if in_order else None,
                         tolerance=self.order_tolerance,
+                        newest_source=self._model.processed_source if in_order else None,
                     )
                     if sensor is not None and sensor.get("time") is not None:
                         owner = sensor.get("source", _first_source(detections))

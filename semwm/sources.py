@@ -251,10 +251,14 @@ class SourceRegistry:
         now: float | None = None,
         newest: float | None = None,
         tolerance: float = 0.0,
+        newest_source: str | None = None,
     ) -> Placement:
         """Put ``detections`` on the service clock and check the time guards; with
         ``tolerance`` > 0, place concurrent scans after ``newest`` (the world's newest
         processed scan time) in arrival order (see the module docstring).
+        ``newest_source``: the source of that scan (``""`` for none), when known: a
+        scan of the same time whose source sorts after it comes after it in the world's
+        own order (time, then source), so it keeps its time.
 
         Raises
         ------
@@ -266,7 +270,7 @@ class SourceRegistry:
         placed, latest, counts, earliest = plain or self._place_each(detections, now)
         moved: dict[tuple[str | None, float], float] = {}
         if tolerance > 0.0 and newest is not None and earliest <= newest:
-            moved = self._concurrent(placed, newest, tolerance)
+            moved = self._concurrent(placed, newest, tolerance, newest_source)
         if moved:
             placed = [_moved(d, moved) for d in placed]
             for d in placed:
@@ -349,16 +353,26 @@ class SourceRegistry:
         return placed, latest, counts, earliest
 
     def _concurrent(
-        self, placed: Sequence[DetectionLike], newest: float, tolerance: float
+        self,
+        placed: Sequence[DetectionLike],
+        newest: float,
+        tolerance: float,
+        newest_source: str | None = None,
     ) -> dict[tuple[str | None, float], float]:
         """The batch's scans ``(source, time)`` to place after ``newest``, in time order,
-        each at the next representable time after the previous one."""
+        each at the next representable time after the previous one. A scan at ``newest``
+        whose source sorts after ``newest_source`` is in the world's order already (a
+        team's synchronised sensors): it keeps its time, and the world processes it at
+        that instant without another prediction step."""
         scans: set[tuple[float, str | None]] = set()
         for d in placed:
             time = _field(d, "time")
             number = isinstance(time, int | float) and not isinstance(time, bool)
             if number and newest - tolerance <= time <= newest:
-                scans.add((float(time), _field(d, "source") or None))
+                source = _field(d, "source") or None
+                if time == newest and newest_source is not None and (source or "") > newest_source:
+                    continue
+                scans.add((float(time), source))
         moved: dict[tuple[str | None, float], float] = {}
         cursor = newest
         for time, source in sorted(scans, key=lambda scan: (scan[0], scan[1] or "")):

@@ -293,6 +293,14 @@ class WorldModel:
         return self._state.time
 
     @property
+    def processed_source(self) -> str | None:
+        """Source (``""`` for none) of the latest processed scan, while the reorder log
+        holds it (``reorder_window`` > 0); scans are processed in (time, source) order."""
+        if not self._log or self._log[-1].key[0] != self._state.time:
+            return None
+        return self._log[-1].key[1]
+
+    @property
     def knowledge(self) -> Knowledge:
         return self._knowledge
 

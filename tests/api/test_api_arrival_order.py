@@ -62,3 +62,19 @@ def test_concurrent_scans_are_processed_in_arrival_order_with_the_strict_orders_
     for a, b in zip(relaxed["objects"], strict["objects"], strict=True):
         assert a["id"] == b["id"] and a["class"] == b["class"]
         assert max(abs(p - q) for p, q in zip(a["position"], b["position"], strict=True)) < 1e-3
+
+
+def test_synchronised_scans_in_source_order_keep_their_times() -> None:
+    """A team's sensors stamping the same instant, arriving in source order: nothing is
+    moved or replayed, and each scan keeps its stamp (one prediction step per instant)."""
+    settings = Settings(knowledge=SIM1, port=0, reorder_window=1.0)
+    with running_server(settings) as url, httpx.Client(base_url=url, timeout=30) as client:
+        for tick in range(5):
+            for robot in (1, 2, 3):
+                scan = _scan(100.0 + 0.1 * tick, robot)
+                assert client.post("/detections", json={"detections": scan}).json()["time"] == (
+                    100.0 + 0.1 * tick
+                )
+        metrics = client.get("/metrics").text
+    assert _metric(metrics, "semwm_replayed_scans") == 0.0
+    assert _metric(metrics, "semwm_arrival_order_scans") == 0.0

@@ -63,3 +63,21 @@ def test_no_tolerance_or_no_world_time_moves_nothing() -> None:
     sent = [_scan(9.999, "r1")]
     assert registry.place(sent, newest=10.0, tolerance=0.0).detections == tuple(sent)
     assert registry.place(sent, newest=None, tolerance=0.005).detections == tuple(sent)
+
+
+def test_a_scan_of_the_newest_instant_that_sorts_after_the_newest_source_keeps_its_time() -> None:
+    # synchronised sensors: the world processes (time, source) in order, so (10.0, "r4")
+    # after (10.0, "r3") is in order and keeps its time; (10.0, "r2") would be a replay
+    registry = SourceRegistry()
+    sent = [_scan(10.0, "r4"), _scan(10.0, "r2"), _scan(10.0, None)]
+    placement = registry.place(sent, newest=10.0, tolerance=0.005, newest_source="r3")
+    first = math.nextafter(10.0, math.inf)
+    second = math.nextafter(first, math.inf)
+    assert [d["time"] for d in placement.detections] == [10.0, second, first]
+    assert placement.moved == {(None, 10.0): first, ("r2", 10.0): second}
+    # the newest source unknown (no reorder log): every scan of that instant is moved
+    assert registry.place(sent, newest=10.0, tolerance=0.005).moved.keys() == {
+        ("r4", 10.0),
+        ("r2", 10.0),
+        (None, 10.0),
+    }
