@@ -51,6 +51,7 @@ from semwm.mhf import nearby
 from semwm.mhf.classes import ClassModel
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted, conform
+from semwm.mhf.prune import log_add
 from semwm.mhf.state import Track
 
 BoolArray = npt.NDArray[np.bool_]
@@ -86,6 +87,23 @@ class DetectionOptions(NamedTuple):
     new_log: float
     presence: dict[int, tuple[float, float]]
     existing: dict[int, tuple[Track, float, float]]
+
+
+class SettledUpdate(NamedTuple):
+    """A detection that certainly updates one object (``mht``): the filter replaces the
+    object's cluster by its updated version, with probability 1, and builds no options.
+
+    What :meth:`semwm.mhf.filter.MultipleHypothesisFilter._certain_update` decides for
+    one detection, decided for a scan's detections at once (:meth:`Associator.options`
+    with ``settle``): the detection gates exactly one object and no other detection
+    gates it, the object is alone and certain in its cluster, no detection of the scan
+    has a label or an appearance relation (nothing else can reach the object), and
+    "new object or clutter" falls below eq. (3)'s floor against the update.
+    """
+
+    measurement: Measurement
+    old_key: int
+    updated: Track
 
 
 def _log(value: float) -> float:
@@ -163,18 +181,38 @@ class Associator:
         new_key: Callable[[], int],
         existence: Sequence[float] = (),
         detection_rates: Mapping[str, FloatArray] | None = None,
-    ) -> list[DetectionOptions]:
+        settle: Mapping[int, float] | None = None,
+        log_ratio: float = -math.inf,
+    ) -> list[DetectionOptions | SettledUpdate]:
         """Every detection's options against the predicted objects; ``existence`` is each
         predicted object's existence probability (``mht``), ``detection_rates`` per
         detector each predicted object's rate f_e in the weight of that detector's
-        detections (:mod:`semwm.mhf.rates`; default: its class's)."""
+        detections (:mod:`semwm.mhf.rates`; default: its class's).
+
+        ``settle`` (``mht``): object key -> log weight of the only hypothesis of its
+        cluster, for the objects alone and certain in theirs; with eq. (3)'s
+        ``log_ratio``, a detection that certainly updates one of them is a
+        :class:`SettledUpdate` instead of options (the key of the object it would have
+        started is used up all the same, so keys do not depend on it).
+        """
         tracks = predicted.tracks
         classes = self.knowledge.classes
         existing = self._existing(predicted, measurements, new_key, existence, detection_rates)
         spread_uniform = -self.log_volume if self.model == "mht" else 0.0
-        result = []
-        new_states = self._new_states(measurements)
+        settled = (
+            self._settled(measurements, existing, settle, log_ratio) if settle is not None else {}
+        )
+        result: list[DetectionOptions | SettledUpdate] = []
+        pending = [j for j in range(len(measurements)) if j not in settled]
+        new_states = dict(
+            zip(pending, self._new_states([measurements[j] for j in pending]), strict=True)
+        )
         for j, m in enumerate(measurements):
+            done = settled.get(j)
+            if done is not None:
+                new_key()  # the key its new object would have had
+                result.append(done)
+                continue
             resolved = classes[m.cls]
             base_rate = resolved.new_frequency
             base_log = _log(base_rate) + spread_uniform
@@ -235,6 +273,44 @@ class Associator:
                     existing=existing[j],
                 )
             )
+        return result
+
+    def _settled(
+        self,
+        measurements: Sequence[Measurement],
+        existing: Sequence[Mapping[int, tuple[Track, float, float]]],
+        settle: Mapping[int, float],
+        log_ratio: float,
+    ) -> dict[int, SettledUpdate]:
+        """The detections (by row) that certainly update one object: see
+        :class:`SettledUpdate`. The weights are compared exactly as
+        ``MultipleHypothesisFilter._certain_update`` compares them."""
+        if not settle or self.model != "mht":
+            return {}
+        classes = self.knowledge.classes
+        if any(m.label is not None or classes[m.cls].appearance for m in measurements):
+            return {}
+        gated: dict[int, int] = {}
+        for found in existing:
+            for key in found:
+                gated[key] = gated.get(key, 0) + 1
+        spread_uniform = -self.log_volume
+        result: dict[int, SettledUpdate] = {}
+        for j, (m, found) in enumerate(zip(measurements, existing, strict=True)):
+            if len(found) != 1:
+                continue
+            ((old_key, (updated, log_num, _)),) = found.items()
+            log_norm = settle.get(old_key)
+            if log_norm is None or gated[old_key] != 1:
+                continue
+            log_update = log_norm + log_num
+            if log_update == -math.inf:
+                continue
+            log_clutter = _log(m.clutter_rate) + self.clutter_log_density[m.detector]
+            new_log = _log(classes[m.cls].new_frequency) + spread_uniform
+            if log_norm + log_add(log_clutter, new_log) >= log_update + log_ratio:
+                continue  # "new object or clutter" survives eq. (3): the general path
+            result[j] = SettledUpdate(m, old_key, updated)
         return result
 
     def _new_states(

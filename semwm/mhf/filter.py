@@ -34,7 +34,7 @@ from semwm.filters.factory import FilterFactory
 from semwm.filters.small import largest_eigenvalue
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
-from semwm.mhf.association import Associator, DetectionOptions
+from semwm.mhf.association import Associator, DetectionOptions, SettledUpdate
 from semwm.mhf.existence import looked_at, near_rate, survive
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted, predict_tracks
@@ -281,20 +281,33 @@ class MultipleHypothesisFilter:
             clusters = self.without(clusters, gone, table.tracks)
             alive = [i for i, k in enumerate(keys) if k not in gone]
             predicted = predicted.subset(alive)
+        settle = self._settleable(clusters) if view is None else None
         options = self.associator.options(
             predicted,
             measurements,
             table.new_key,
             [existence[t.key] for t in predicted.tracks],
             self._stream_rates(state.observed, predicted, measurements, time),
+            settle,
+            self.log_ratio,
         )
         if view is not None and self.mht:
-            seen = {k for option in options for k in option.existing}
+            seen = {  # no SettledUpdate with a view (settle is None)
+                k
+                for option in options
+                if isinstance(option, DetectionOptions)
+                for k in option.existing
+            }
             r_view, log_q_view = looked_at(view, predicted, seen, table.existence, self.knowledge)
             table.existence.update(r_view)
             clusters = self.undetected(clusters, log_q_view, table.tracks)
         book = _ClusterBook(clusters)
         for option in options:
+            if isinstance(option, SettledUpdate):  # what _certain_update would give
+                table.add(option.updated, origin=option.old_key, fresh=True)
+                book.take(book.owners({option.old_key}))
+                book.put((_certain(option.updated),))
+                continue
             if not self.mht:
                 table.add(option.new_track, fresh=True)
             for old_key, (updated, _, _) in option.existing.items():
@@ -325,6 +338,18 @@ class MultipleHypothesisFilter:
         if self.observed_rates and measurements:
             observed = self._observe(observed, state.tracks, options, final, table, time)
         return MHFState(final, tracks, time, table.next_key, kept, observed)
+
+    def _settleable(self, clusters: Sequence[Cluster]) -> dict[int, float] | None:
+        """Object key -> log weight of its cluster's only hypothesis, for the objects alone
+        and certain in their cluster: the ones a detection can update for certain
+        (:class:`SettledUpdate`). ``None`` where :meth:`_certain_update` never applies."""
+        if not (self.mht and self.factorised and self.ratio > 0.0):
+            return None
+        return {
+            next(iter(c.keys)): c.hypotheses[0].log_weight
+            for c in clusters
+            if len(c.hypotheses) == 1 and len(c.keys) == 1
+        }
 
     def _merge_similar(
         self, clusters: Sequence[Cluster], table: _TrackTable, untouched: set[int]
@@ -370,7 +395,7 @@ class MultipleHypothesisFilter:
     def _observe(
         observed: ObservedRates,
         before: Mapping[int, Track],
-        options: Sequence[DetectionOptions],
+        options: Sequence[DetectionOptions | SettledUpdate],
         final: Sequence[Cluster],
         table: _TrackTable,
         time: float,
@@ -381,6 +406,9 @@ class MultipleHypothesisFilter:
         detector_of: dict[int, str] = {}
         for option in options:
             detector = option.measurement.detector
+            if isinstance(option, SettledUpdate):  # it started no object
+                detector_of.setdefault(before[option.old_key].lineage, detector)
+                continue
             detector_of.setdefault(option.new_track.lineage, detector)
             for old_key in option.existing:
                 detector_of.setdefault(before[old_key].lineage, detector)
@@ -630,8 +658,7 @@ class MultipleHypothesisFilter:
         log_unassigned = log_norm + log_add(option.log_clutter, option.new_log)
         if log_unassigned >= log_update + math.log(self.ratio):
             return None  # both children are kept: the general path
-        key = updated.key
-        return Cluster((Hypothesis(0.0, frozenset({key}), updated.rate),), frozenset({key}))
+        return _certain(updated)
 
     def _birth(self, option: DetectionOptions, birth_log: float, table: _TrackTable) -> int:
         """The version a detection starts with birth weight ``birth_log`` (``mht``): its
@@ -650,6 +677,12 @@ class MultipleHypothesisFilter:
             table.births[(option.new_track.key, birth_log)] = born
             table.born.add(option.new_track.key)
         return born.key
+
+
+def _certain(track: Track) -> Cluster:
+    """A cluster holding ``track`` for certain: one hypothesis, probability 1."""
+    key = track.key
+    return Cluster((Hypothesis(0.0, frozenset({key}), track.rate),), frozenset({key}))
 
 
 class _ClusterBook:
