@@ -178,10 +178,7 @@ def _metric_sums(text: str) -> dict[str, float]:
 
 
 def _metrics(client: Client) -> dict[str, float]:
-    connection = client._connect()
-    connection.request("GET", "/metrics")
-    response = connection.getresponse()
-    return _metric_sums(response.read().decode())
+    return _metric_sums(client.get_text("/metrics"))
 
 
 # -- one run of a case --------------------------------------------------------------------------

@@ -27,7 +27,7 @@ import urllib.request
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from semwm.http_connection import HttpConnection
+from semwm.http_connection import Answer, HttpConnection
 
 Transport = Callable[[str, dict[str, Any]], dict[str, Any]]
 
@@ -117,6 +117,31 @@ class Client:
         ``GET``): send again once if the connection dropped before an answer.
         """
         body = None if payload is None else json.dumps(payload, separators=(",", ":")).encode()
+        response = self._exchange(method, path, body, headers, retry)
+        answer = json.loads(response.body) if response.body else None
+        if response.status >= 400:
+            raise ServiceError(response.status, answer)
+        return answer
+
+    def get_text(self, path: str) -> str:
+        """``GET path`` answered in text, e.g. ``/metrics`` (Prometheus' format).
+
+        Raises :class:`ServiceError` for a 4xx/5xx answer."""
+        response = self._exchange("GET", path, None, {"accept": "text/plain"}, None)
+        text = response.body.decode()
+        if response.status >= 400:
+            raise ServiceError(response.status, text)
+        return text
+
+    def _exchange(
+        self,
+        method: str,
+        path: str,
+        body: bytes | None,
+        headers: Mapping[str, str] | None,
+        retry: bool | None,
+    ) -> Answer:
+        """One request and its answer on the kept connection (see :meth:`request`)."""
         all_headers = {**self.headers, **headers} if headers else self.headers
         again = method == "GET" if retry is None else retry
         for attempt in (1, 2):
@@ -135,10 +160,7 @@ class Client:
             if not response.keep_alive:
                 self.close()
             self.last_headers = dict(response.headers)
-            answer = json.loads(response.body) if response.body else None
-            if response.status >= 400:
-                raise ServiceError(response.status, answer)
-            return answer
+            return response
         raise AssertionError("unreachable")  # pragma: no cover
 
     def post_detections(

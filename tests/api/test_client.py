@@ -35,6 +35,12 @@ def test_requests_share_one_connection_and_refusals_carry_the_field_paths(
         assert "position" in str(refused.value)
         assert client.get("/health")["commit"] == 2  # nothing applied
         assert client._connection is connection  # a 422 keeps the connection
+        metrics = client.get_text("/metrics")  # text, on the same connection
+        assert "\nsemwm_detections_accepted_total 3.0\n" in metrics
+        assert client._connection is connection
+        with pytest.raises(ServiceError) as missing:
+            client.get_text("/no-such-page")
+        assert missing.value.status == 404
 
 
 def test_a_connection_the_server_closed_while_idle_is_opened_again(knowledge_file: Path) -> None:
