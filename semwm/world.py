@@ -1180,6 +1180,9 @@ class WorldModel:
             floor = 0.0
         covered = self.taxonomy.covers(cls) if cls is not None else None
         objects = []
+        # Python floats of every row at once (float() of each numpy scalar was most of
+        # a large world's query time)
+        rows = predicted.position.tolist(), predicted.position_covariance.tolist()
         for marginal in marginals.values():
             track, i = marginal.track, marginal.row
             if marginal.existence < floor or track.created > at + 1e-9:
@@ -1194,7 +1197,7 @@ class WorldModel:
                 and float(np.linalg.norm(position - np.asarray(near[:dim]))) > near[dim]
             ):
                 continue
-            obj = self._world_object(track, predicted, i, marginal.existence, at)
+            obj = self._world_object(track, predicted, i, marginal.existence, at, rows)
             if states is not None and (
                 obj.confidence is None or obj.confidence.state not in states
             ):
@@ -1208,19 +1211,26 @@ class WorldModel:
         return next((o for o in self.world(time).objects if o.id == object_id), None)
 
     def _world_object(
-        self, track: Track, predicted: Predicted, i: int, existence: float, at: float
+        self,
+        track: Track,
+        predicted: Predicted,
+        i: int,
+        existence: float,
+        at: float,
+        rows: tuple[list[list[float]], list[list[list[float]]]],
     ) -> WorldObject:
+        """``rows``: every prediction's position and covariance as Python floats."""
         dim = self._knowledge.world.dimension
         mean = predicted.state_mean[i]
         flt = self._mhf.factory.filter_for(track.cls)
-        velocity = tuple(float(v) for v in mean[dim : 2 * dim]) if mean.shape[0] > dim else None
+        velocity = tuple(mean[dim : 2 * dim].tolist()) if mean.shape[0] > dim else None
         modes = None
         if flt.modes > 1:
             names = [
                 o if list(flt.orders).count(o) == 1 else f"{o}_{j}"
                 for j, o in enumerate(flt.orders)
             ]
-            modes = {n: float(p) for n, p in zip(names, predicted.mu[i], strict=True)}
+            modes = dict(zip(names, predicted.mu[i].tolist(), strict=True))
         object_id = self._ids.get(track.lineage)
         if object_id is None:
             # below the publishing threshold and asked for (min_existence): a provisional
@@ -1231,11 +1241,9 @@ class WorldModel:
             id=object_id,
             cls=track.cls,
             label=track.label,
-            position=tuple(float(v) for v in predicted.position[i]),
+            position=tuple(rows[0][i]),
             velocity=velocity,
-            covariance=tuple(
-                tuple(float(v) for v in row) for row in predicted.position_covariance[i]
-            ),
+            covariance=tuple(map(tuple, rows[1][i])),
             existence=min(1.0, existence),
             last_seen=track.last_seen,
             created=track.created,

@@ -121,7 +121,8 @@ class ClassModel:
 
     def as_dict(self, probabilities: FloatArray, floor: float = 1e-3) -> dict[str, float]:
         """The distribution as ``{class: probability}``, classes below ``floor`` left out."""
-        return {self.names[i]: float(p) for i, p in enumerate(probabilities) if p >= floor}
+        names = self.names
+        return {names[i]: p for i, p in enumerate(probabilities.tolist()) if p >= floor}
 
     def point(self, name: str) -> FloatArray:
         """A distribution sitting on one class."""
