@@ -1077,13 +1077,15 @@ class WorldModel:
                 if log_q
                 else state.clusters
             )
+            # Python floats: the sums below stay floats (numpy scalars are slower, and
+            # made the published existence an np.float64 when it was below 1)
             inside = inside_probability(
                 predicted.position, predicted.position_covariance, self._knowledge.world.region
-            )
+            ).tolist()
         else:
             existence = dict.fromkeys(keys, 1.0)
             clusters = state.clusters
-            inside = np.ones(len(keys))
+            inside = [1.0] * len(keys)
         row = {k: i for i, k in enumerate(keys)}
         floor = self._knowledge.world.min_existence
         gone = self._mhf.leaving(predicted, at, existence if self._mhf.mht else None)

@@ -39,6 +39,15 @@ def test_to_dict_is_asdict_with_class_last(name: str, sizes: dict[str, float]) -
             expected, got = _asdict(value), value.to_dict()
             assert got == expected and list(got) == list(expected)
             seen.update(k for k, v in got.items() if v is not None)
+            # Python floats, not numpy scalars (an existence below 1 was an np.float64)
+            assert type(value.existence) is float
+            assert all(type(v) is float for v in value.position)
+        for obj in world.world(min_existence=0.001).objects:
+            numbers = [*obj.position, *(obj.velocity or ()), *sum(obj.covariance, ())]
+            numbers += [*(obj.mode_probabilities or {}).values()]
+            numbers += [*(obj.class_probabilities or {}).values()]
+            numbers += [obj.confidence.value] if obj.confidence is not None else []
+            assert all(type(v) is float for v in numbers)
     # every field was filled at least once (modes, class probabilities, confidence;
     # labels in RoboCup only)
     unlabelled = {"label"} if name == "sim2" else set()
