@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Path, Query
+from fastapi import APIRouter, Path, Query, Response
 
 from api.deps import WorldDep
 from api.errors import InvalidError
@@ -17,6 +17,7 @@ from api.schemas import (
     WorldObjectOut,
     WorldOut,
 )
+from api.world_json import object_json, world_json
 
 router = APIRouter(tags=["world"])
 
@@ -89,7 +90,7 @@ def get_world(
             "several (confidence=valid&confidence=suspicious)."
         ),
     ] = None,
-) -> WorldOut:
+) -> Response:
     """The objects of the world (each at least ``min_existence`` likely to exist over the
     whole hypothesis set), predicted to ``time``."""
     centre = parse_near(near) if near is not None else None
@@ -101,7 +102,7 @@ def get_world(
         min_existence=min_existence,
         confidence=confidence,
     )
-    return WorldOut.model_validate(state.to_dict())
+    return Response(world_json(state), media_type="application/json")  # as WorldOut
 
 
 @router.get(
@@ -114,9 +115,10 @@ def get_object(
     world: WorldDep,
     object_id: Annotated[int, Path(description="The object's id as in GET /world.")],
     time: TimeQuery = None,
-) -> WorldObjectOut:
+) -> Response:
     """One object, predicted to ``time``; 404 naming the id when it is not in the world."""
-    return WorldObjectOut.model_validate(world.object(object_id, time=time).to_dict())
+    obj = world.object(object_id, time=time)
+    return Response(object_json(obj), media_type="application/json")  # as WorldObjectOut
 
 
 @router.get(
