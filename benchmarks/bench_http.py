@@ -15,6 +15,8 @@ in-process (a fresh :class:`semwm.WorldModel`, ``ingest`` of the scenario's
   detections; the room (``sim2``: one person walking, clutter; scans of 1-2) and
   RoboCup (``robocup``, 2 s: 5 observers at 30 Hz; scans of 1-7).
 * Batches: a static grid of 100 objects, 10 frames (1,000 detections) per request.
+* Queries: ``GET /world`` of a static grid of 20 and 1,000 objects beside the model's
+  ``world()`` in process.
 
 Split of the HTTP time, from the service's Prometheus metrics
 (``semwm_ingest_apply_seconds``: the world model's part under the lock;
@@ -118,6 +120,21 @@ def make_cases(directory: Path, quick: bool) -> list[Case]:
     dets = list(scenario.detections)
     batches = [dets[i : i + BATCH] for i in range(0, len(dets), BATCH)]
     cases.append(Case(f"grid {GRID_BATCH_OBJECTS}, batches of {BATCH}", "batches", path, batches))
+    return cases
+
+
+QUERY_OBJECTS = (20, 1000)
+QUERIES = 30
+
+
+def make_query_cases(directory: Path) -> list[Case]:
+    """Worlds to query: a static grid of N objects after 5 frames (one scan each)."""
+    cases = []
+    for n in QUERY_OBJECTS:
+        path, _ = _grid_knowledge(n, directory)
+        scenario = make_scenario("grid", 0, n_objects=n, duration=0.4)
+        requests = list(scans(scenario.detections))
+        cases.append(Case(f"GET /world, {n} objects", "query", path, requests))
     return cases
 
 
@@ -242,6 +259,61 @@ def run_case(case: Case, repeats: int, servers: dict[str, Path | None]) -> list[
     return [_row(case, label, label_runs) for label, label_runs in runs.items()]
 
 
+def query_in_process(case: Case) -> float:
+    """Seconds per ``WorldModel.world()`` of ``case``'s world (mean of :data:`QUERIES`)."""
+    model = WorldModel(load_knowledge(case.knowledge), reorder_window=REORDER_WINDOW)
+    for request in case.requests:
+        model.ingest(request)
+    started = time.perf_counter()
+    for _ in range(QUERIES):
+        model.world()
+    return (time.perf_counter() - started) / QUERIES
+
+
+def query_over_http(case: Case, client: Client) -> tuple[float, int]:
+    """Seconds per ``GET /world`` of ``case``'s world, and the objects answered."""
+    client.request("POST", "/reset")
+    for request in case.requests:
+        client.post_detections([d.to_dict() for d in request])
+    objects = len(client.get("/world")["objects"])
+    started = time.perf_counter()
+    for _ in range(QUERIES):
+        client.get("/world")
+    return (time.perf_counter() - started) / QUERIES, objects
+
+
+def run_query_case(
+    case: Case, repeats: int, servers: dict[str, Path | None]
+) -> list[dict[str, Any]]:
+    """``GET /world`` on ``case``'s world over HTTP to each server, beside the model's
+    ``world()`` in process (medians of ``repeats``)."""
+    running = {label: Server(case.knowledge, source) for label, source in servers.items()}
+    rows = []
+    try:
+        local = [query_in_process(case) for _ in range(repeats)]
+        for label, server in running.items():
+            with Client(server.url, timeout=120) as client:
+                query_over_http(case, client)  # warm-up
+                measured = [query_over_http(case, client) for _ in range(repeats)]
+            http = statistics.median(m[0] for m in measured)
+            inside = statistics.median(local)
+            rows.append(
+                {
+                    "case": case.name,
+                    "server": label,
+                    "objects": measured[-1][1],
+                    "queries": QUERIES,
+                    "in_process_ms": round(inside * 1e3, 3),
+                    "http_ms": round(http * 1e3, 3),
+                    "ratio": round(http / inside, 3),
+                }
+            )
+    finally:
+        for server in running.values():
+            server.stop()
+    return rows
+
+
 def _row(case: Case, server: str, runs: list[dict[str, float]]) -> dict[str, Any]:
     n = case.detections
     med = {key: statistics.median(r[key] for r in runs) for key in runs[0]}
@@ -326,6 +398,23 @@ def markdown(doc: dict[str, Any]) -> str:
             f"{fmt(r['client_us_per_det'])} | {fmt(r['overhead_us_per_det'])} | "
             f"{fmt(r['det_per_s_without_mhf'])} |"
         )
+    if doc.get("queries"):
+        lines += [
+            "",
+            "## Queries: `GET /world` beside the model's `world()`",
+            "",
+            "A static grid after 5 frames; each figure the mean of "
+            f"{doc['queries'][0]['queries']} queries, the median of the runs. HTTP counts the "
+            "query, its JSON and the round trip.",
+            "",
+            "| case | server | objects | in-process ms | HTTP ms | HTTP / in-process |",
+            "|---|---|---|---|---|---|",
+        ]
+        for q in doc["queries"]:
+            lines.append(
+                f"| {q['case']} | {q['server']} | {q['objects']} | {fmt(q['in_process_ms'])} | "
+                f"{fmt(q['http_ms'])} | {q['ratio']:.2f} |"
+            )
     lines += [
         "",
         "HTTP / in-process: wall time. CPU: the CPU time of the server process (every "
@@ -394,6 +483,14 @@ def main(argv: Sequence[str] | None = None) -> None:
             for case in tqdm(cases, desc="http", unit="case")
             for row in run_case(case, args.repeats, servers)
         ]
+        query_cases = [
+            c for c in make_query_cases(Path(directory)) if not args.only or args.only in c.name
+        ]
+        queries = [
+            row
+            for case in tqdm(query_cases, desc="queries", unit="case")
+            for row in run_query_case(case, args.repeats, servers)
+        ]
     report = {
         "benchmark": "http",
         "quick": args.quick,
@@ -409,6 +506,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         },
         "machine": machine_info(),
         "results": rows,
+        "queries": queries,
     }
     write_results(
         RESULTS, "http", report, markdown(report), args.quick, update_results=args.update_results
