@@ -31,7 +31,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from api.errors import ApiError
 from api.routes.detections import apply_json
-from api.schemas import MAX_KEY, IngestOut
+from api.schemas import MAX_KEY, ingest_out
 from api.service import COMMIT_HEADER, Committed, WorldBusy, WorldService
 from semwm import IngestResult
 
@@ -91,7 +91,7 @@ class FastIngest:
             return
         result = committed.value
         body = (
-            IngestOut(applied=result.applied, time=result.time, ignored=result.ignored)
+            ingest_out(result)
             .model_dump_json()
             .encode()
         )

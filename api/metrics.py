@@ -6,7 +6,7 @@ sizes are read at scrape time (:class:`WorldCollector`), so scraping costs one
 lock acquisition and ingesting costs two counter increments.
 
 Metric names (all prefixed ``semwm_``): ``detections_accepted_total``,
-``detections_ignored_total``, ``detections_refused_total{reason}``,
+``detections_ignored_total{source,reason}``, ``detections_refused_total{reason}``,
 ``ingest_latency_seconds`` (the whole ``POST /detections`` request),
 ``ingest_apply_seconds`` (the world model's part, under the lock), ``objects``,
 ``stored_hypotheses``, ``joint_hypotheses_log10``, ``clusters``, ``tracks``,
@@ -113,7 +113,9 @@ class Metrics:
         )
         self.ignored = Counter(
             "semwm_detections_ignored",
-            "Detections accepted but beyond their detector's range (applied as nothing)",
+            "Detections accepted but not used, by source and reason: out_of_range (beyond "
+            "their detector's range) or outside_region (clearly outside the region)",
+            ["source", "reason"],
             registry=self.registry,
         )
         self.refused = Counter(
@@ -145,7 +147,8 @@ class Metrics:
         """The service's listener: count applied detections and time the apply."""
         if change.kind == "detections":
             self.accepted.inc(change.applied)
-            self.ignored.inc(change.ignored)
+            for item in change.ignored_detections:
+                self.ignored.labels(source=item.source or "", reason=item.reason).inc()
             self.apply_seconds.observe(change.seconds)
 
 

@@ -16,6 +16,7 @@ from typing_extensions import TypedDict  # pydantic needs it before Python 3.12
 
 from semwm.detection import MAX_TIME_STD
 from semwm.knowledge import ClassSpec, ResolvedClass
+from semwm.world import IngestResult
 
 MAX_COORDINATE = 1e6
 """m: the largest absolute coordinate a detection may have (1000 km)."""
@@ -206,6 +207,17 @@ DETECTION_ADAPTER: TypeAdapter[DetectionDict] = TypeAdapter(DetectionDict)
 BATCH_ADAPTER: TypeAdapter[DetectionBatchDict] = TypeAdapter(DetectionBatchDict)
 
 
+class IgnoredOut(BaseModel):
+    """A detection of the batch accepted but not used, and why."""
+
+    index: int = Field(description="Its place in the batch (0-based).")
+    reason: Literal["out_of_range", "outside_region"] = Field(
+        description="out_of_range: beyond its detector's range from its sensor_position; "
+        "outside_region: outside the knowledge's region by more than its noise."
+    )
+    message: str
+
+
 class IngestOut(BaseModel):
     """What ``POST /detections`` acknowledges."""
 
@@ -214,7 +226,14 @@ class IngestOut(BaseModel):
     applied: int = Field(description="How many detections were applied.")
     time: float | None = Field(description="The world time after them (s).")
     ignored: int = Field(
-        default=0, description="Accepted but not used: beyond their detector's range."
+        default=0,
+        description="Accepted but not used: beyond their detector's range, or clearly "
+        "outside the knowledge's region (each listed in ignored_detections).",
+    )
+    ignored_detections: list[IgnoredOut] = Field(
+        default_factory=list,
+        description="Each detection accepted but not used: its index in the batch, why "
+        "(out_of_range, outside_region) and a message; usually a unit or frame mistake.",
     )
 
 
@@ -406,3 +425,16 @@ class KnowledgeFileErrorOut(BaseModel):
 
     detail: str
     problems: list[str]
+
+
+def ingest_out(result: IngestResult) -> IngestOut:
+    """The acknowledgement of an applied batch."""
+    return IngestOut(
+        applied=result.applied,
+        time=result.time,
+        ignored=result.ignored,
+        ignored_detections=[
+            IgnoredOut(index=i.index, reason=i.reason, message=i.message)
+            for i in result.ignored_detections
+        ],
+    )

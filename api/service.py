@@ -31,7 +31,13 @@ from api.errors import (
 from api.ordered_lock import TimeOrderedLock
 from semwm import IngestResult, WorldModel, load_knowledge
 from semwm.clock import Exchange
-from semwm.detection import Detection, DetectionError, DetectionProblem, OutOfOrderError
+from semwm.detection import (
+    BeforeHistoryError,
+    Detection,
+    DetectionError,
+    DetectionProblem,
+    OutOfOrderError,
+)
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
 from semwm.persistence.records import (
     Record,
@@ -48,6 +54,7 @@ from semwm.sources import (
     TimeGuardError,
 )
 from semwm.team import LocalModel
+from semwm.world import IgnoredDetection
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 
 T = TypeVar("T")
@@ -79,6 +86,7 @@ class WorldChange:
     ignored: int = 0
     time: float | None = None
     seconds: float = 0.0
+    ignored_detections: tuple[IgnoredDetection, ...] = ()
 
 
 ChangeListener = Callable[[WorldChange], None]
@@ -214,6 +222,7 @@ class WorldService:
         self._failure: str | None = None
         self._sources: set[str] = set()
         self._recent: OrderedDict[str, Committed[IngestResult]] = OrderedDict()
+        self._warned_ignored: set[tuple[str | None, str]] = set()
         self._summary = self._summarise()
         self.hooks: list[ChangeHook] = []
         self._listeners: list[ChangeListener] = []
@@ -432,6 +441,7 @@ class WorldService:
                     raise ConflictError(message + hint) from error
             with self._sources_lock:
                 self.sources.accepted(placement, now)
+            self._warn_ignored(result.ignored_detections)
             self.arrival_order_scans += len(placement.moved)
             if self._listeners:
                 self._notify(
@@ -440,6 +450,7 @@ class WorldService:
                         tuple(placed),
                         applied=result.applied,
                         ignored=result.ignored,
+                        ignored_detections=result.ignored_detections,
                         time=result.time,
                         seconds=time.perf_counter() - started,
                     )
@@ -539,6 +550,22 @@ class WorldService:
                 ("query", "class"), f"unknown class {cls!r}; known classes: {known}"
             )
 
+    def _warn_ignored(self, ignored: Sequence[IgnoredDetection]) -> None:
+        """Log the first ignored detection of each source and reason once, at WARNING,
+        with its hint: it is usually a unit or frame mistake, and nothing else says so."""
+        for item in ignored:
+            key = (item.source, item.reason)
+            if key in self._warned_ignored:
+                continue
+            self._warned_ignored.add(key)
+            logger.warning(
+                "source %r: a detection was ignored (%s): %s; later ones are counted in "
+                "/metrics (semwm_detections_ignored_total) and listed in each answer",
+                item.source,
+                item.reason,
+                item.message,
+            )
+
     def world(
         self,
         time: float | None = None,
@@ -566,6 +593,8 @@ class WorldService:
                     min_existence=min_existence,
                     confidence=confidence,
                 )
+            except BeforeHistoryError as error:
+                raise ConflictError(str(error)) from error
             except ValueError as error:
                 raise InvalidError.one(("query",), str(error)) from error
 
@@ -573,6 +602,8 @@ class WorldService:
         with self._locked():
             try:
                 found = self._model.object(object_id, time=time)
+            except BeforeHistoryError as error:
+                raise ConflictError(str(error)) from error
             except ValueError as error:
                 raise InvalidError.one(("query", "time"), str(error)) from error
         if found is None:

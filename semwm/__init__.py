@@ -3,7 +3,7 @@
 >>> from semwm import WorldModel, load_knowledge
 """
 
-from semwm.detection import Detection, DetectionError, OutOfOrderError
+from semwm.detection import BeforeHistoryError, Detection, DetectionError, OutOfOrderError
 from semwm.knowledge.loader import load_knowledge
 from semwm.world import IngestResult, WorldModel
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
@@ -11,6 +11,7 @@ from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 __version__ = "0.1.0"
 
 __all__ = [
+    "BeforeHistoryError",
     "Detection",
     "DetectionError",
     "HypothesisSummary",

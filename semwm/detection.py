@@ -89,6 +89,25 @@ class OutOfOrderError(ValueError):
         )
 
 
+class BeforeHistoryError(ValueError):
+    """A query about a time older than the reorder history remembers: semwm does not
+    know the world as it was then (it never answers with the current one instead)."""
+
+    def __init__(self, time: float, oldest: float | None, latest: float) -> None:
+        self.time = time
+        self.oldest = oldest
+        self.latest = latest
+        since = (
+            f"the world is remembered from {oldest:g} s"
+            if oldest is not None
+            else "no earlier state is remembered (reorder window 0)"
+        )
+        super().__init__(
+            f"time {time:g} s is before the newest scan ({latest:g} s) and {since}; "
+            "ask for a later time, or keep a longer history (--reorder-window)"
+        )
+
+
 class SensorReport(BaseModel):
     """What a sensor looked at in one scan (paper 004: negative information).
 

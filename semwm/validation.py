@@ -188,6 +188,29 @@ def out_of_range(det: Detection, knowledge: Knowledge, R: np.ndarray | None = No
     return distance > detector.range + margin
 
 
+def outside_region(det: Detection, knowledge: Knowledge, R: np.ndarray) -> bool:
+    r"""Whether the detection lies clearly outside the knowledge's region: beyond an edge
+    by more than its noise at the gate's one-dimensional quantile on that axis (the
+    region is a soft fact: :func:`semwm.mhf.existence.inside_probability`),
+
+    .. math:: z_i < a_i - \sqrt{\gamma R_{ii}} \;\text{or}\; z_i > b_i + \sqrt{\gamma R_{ii}}
+
+    No sensor sees an object there, so it is no evidence about the world; a unit or a
+    frame mistake (millimetres for metres, odom for map) usually puts detections there.
+    """
+    region = knowledge.world.region
+    if region is None:
+        return False
+    p = knowledge.world.gate_probability
+    gamma = _line_of_sight_gate(p) if p < 1.0 else 0.0
+    for axis, (low, high) in enumerate(region):
+        value = float(det.position[axis])
+        margin = math.sqrt(gamma * max(float(R[axis, axis]), 0.0))
+        if value < low - margin or value > high + margin:
+            return True
+    return False
+
+
 @functools.lru_cache(maxsize=16)
 def _line_of_sight_gate(p: float) -> float:
     """The one-dimensional chi-square quantile of ``p`` (once per gate probability)."""

@@ -14,12 +14,12 @@ changes nothing.
 from __future__ import annotations
 
 import math
-from bisect import bisect_left
+from bisect import bisect_left, bisect_right
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from operator import attrgetter
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -37,6 +37,8 @@ from semwm.confidence import (
 )
 from semwm.detection import (
     ActionReport,
+    BeforeHistoryError,
+    Detection,
     DetectionError,
     DetectionProblem,
     OutOfOrderError,
@@ -53,7 +55,14 @@ from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted
 from semwm.mhf.state import Cluster, MHFState, Track
-from semwm.validation import DetectionInput, as_batch, check, out_of_range, parse
+from semwm.validation import (
+    DetectionInput,
+    as_batch,
+    check,
+    out_of_range,
+    outside_region,
+    parse,
+)
 from semwm.world_types import HypothesisObject, HypothesisSummary, WorldObject, WorldState
 
 ScanKey = tuple[float, str]
@@ -62,14 +71,34 @@ _SAME_OBJECT_GATE = 1.0  # 4 x Bhattacharyya distance: two lineages' estimates c
 _GROUPING_FLOOR = 1e-3  # lineages less likely than this are not grouped
 
 
+IgnoreReason = Literal["out_of_range", "outside_region"]
+
+
+@dataclass(frozen=True)
+class IgnoredDetection:
+    """A detection accepted but not used, and why: ``out_of_range`` (beyond its
+    detector's ``range`` from its sensor, paper 000 C2) or ``outside_region`` (clearly
+    outside the knowledge's region: :func:`semwm.validation.outside_region`).
+    ``index``: its place in the batch."""
+
+    index: int
+    reason: IgnoreReason
+    message: str
+    source: str | None = None
+
+    def to_dict(self) -> dict[str, object]:
+        return {"index": self.index, "reason": self.reason, "message": self.message}
+
+
 @dataclass(frozen=True)
 class IngestResult:
-    """How many detections were applied, how many ignored (outside their detector's
-    range, paper 000 C2), and the world time after them."""
+    """How many detections were applied, how many ignored (and which, why), and the
+    world time after them."""
 
     applied: int
     time: float | None
     ignored: int = 0
+    ignored_detections: tuple[IgnoredDetection, ...] = ()
 
 
 class _Marginal(NamedTuple):
@@ -267,6 +296,7 @@ class WorldModel:
         self._lost: dict[int, _Published] = {}
         self._pending: dict[ScanKey, _Held] = {}  # held scans (values immutable)
         self._newest: float | None = None  # newest accepted time, pending included
+        self._earliest: float | None = None  # earliest accepted time: nothing before it
         self._tentative: _Tentative | None = None  # cache for queries
         self.replayed_scans = 0  # logged scans processed again: an older one came after
 
@@ -417,12 +447,15 @@ class WorldModel:
         parsed = parse(batch)
         measurements = check(parsed, self._knowledge, self._mhf.factory, self._seq)
         view = self._view(sensor, measurements) if sensor is not None else None
-        used = [
-            m
-            for m, d in zip(measurements, parsed, strict=True)
-            if not out_of_range(d, self._knowledge, m.R)
-        ]
-        ignored = len(measurements) - len(used)
+        used: list[Measurement] = []
+        skipped: list[IgnoredDetection] = []
+        for index, (m, d) in enumerate(zip(measurements, parsed, strict=True)):
+            why = self._ignored(d, m, index)
+            if why is None:
+                used.append(m)
+            else:
+                skipped.append(why)
+        ignored = len(skipped)
         latest = self._state.time
         times = [m.time for m in used] + ([view.time] if view is not None else [])
         if times and latest is not None:
@@ -434,8 +467,9 @@ class WorldModel:
             if floor is not None and min(keys) <= floor[0]:
                 raise OutOfOrderError(earliest, latest, latest - floor[0][0], why=floor[1])
         if times:
-            newest = max(times)
+            newest, earliest = max(times), min(times)
             self._newest = newest if self._newest is None else max(self._newest, newest)
+            self._earliest = earliest if self._earliest is None else min(self._earliest, earliest)
         if self._hold > 0 and (used or view is not None):
             self._hold_scans(*_grouped(used, view))
         else:
@@ -443,7 +477,35 @@ class WorldModel:
             if used or view is not None:
                 self._publish()
         self._seq += len(batch)
-        return IngestResult(applied=len(used), time=self.latest_time, ignored=ignored)
+        return IngestResult(
+            applied=len(used),
+            time=self.latest_time,
+            ignored=ignored,
+            ignored_detections=tuple(skipped),
+        )
+
+    def _ignored(self, det: Detection, m: Measurement, index: int) -> IgnoredDetection | None:
+        """Why detection ``index`` of a batch is not used, or ``None`` when it is."""
+        if out_of_range(det, self._knowledge, m.R):
+            detector = det.detector or self._knowledge.default_detector
+            reach = self._knowledge.detectors[detector].range
+            return IgnoredDetection(
+                index,
+                "out_of_range",
+                f"beyond detector {detector!r}'s range of {reach:g} m from its sensor_position "
+                "(check units and frame)",
+                m.source,
+            )
+        if self._knowledge.world.region is not None and outside_region(det, self._knowledge, m.R):
+            region = ", ".join(f"[{a:g}, {b:g}]" for a, b in self._knowledge.world.region)
+            return IgnoredDetection(
+                index,
+                "outside_region",
+                f"position {list(det.position)} is outside the knowledge's region {region} "
+                "by more than its noise (check units and frame)",
+                m.source,
+            )
+        return None
 
     def _commit(
         self, state: MHFState, log: list[_LoggedScan], book: ConfidenceBook, floor: _Floor | None
@@ -849,7 +911,8 @@ class WorldModel:
             return False
         x, P = _summary_position(pub.track, self._knowledge.world.dimension)
         region = self._knowledge.world.region
-        if inside_probability(x[None], P[None], region)[0] < 0.5:
+        margin = self._mhf.region_margins([pub.track])
+        if inside_probability(x[None], P[None], region, margin)[0] < 0.5:
             return False
         for relation in spec.disappearance:
             covered = self.taxonomy.covers(relation.target)
@@ -959,7 +1022,9 @@ class WorldModel:
         if new:
             dim = self._knowledge.world.dimension
             position, covariance = _stored_positions(new, dim)
-            inside = inside_probability(position, covariance, self._knowledge.world.region)
+            inside = inside_probability(
+                position, covariance, self._knowledge.world.region, self._mhf.region_margins(new)
+            )
             for track, x, P, p in zip(
                 new, list(position), list(covariance), inside.tolist(), strict=True
             ):
@@ -1062,26 +1127,42 @@ class WorldModel:
             result[best] = marginals[best]._replace(existence=total)
         return result
 
-    def _marginals(self, at: float) -> tuple[dict[int, _Marginal], Predicted]:
-        """Every object's marginal existence at ``at`` and its most probable version."""
+    def _as_of(self, at: float) -> tuple[MHFState, ConfidenceBook]:
+        """The state and confidences as they were at ``at`` (s): the current ones from the
+        newest scan on; before it, the ones after the last scan at or before ``at``, from
+        the reorder history. Raises :class:`BeforeHistoryError` when the history does not
+        reach back that far."""
         state = self._state
+        if state.time is None or at >= state.time - 1e-9:
+            return state, self._book
+        if self._earliest is not None and at < self._earliest:  # before anything was seen
+            return MHFState.empty(), ConfidenceBook()
+        log = self._log
+        later = bisect_right(log, at, key=lambda scan: scan.key[0])  # first scan after at
+        if later == len(log):  # no scan logged after ``at``: the log is empty
+            raise BeforeHistoryError(at, None, state.time)
+        before = log[later].before
+        if later == 0 and before.time is not None and before.time > at:
+            raise BeforeHistoryError(at, before.time, state.time)
+        return before, log[later].book
+
+    def _marginals(
+        self, at: float, state: MHFState | None = None
+    ) -> tuple[dict[int, _Marginal], Predicted]:
+        """Every object's marginal existence at ``at`` and its most probable version, in
+        ``state`` (default: the current one)."""
+        state = self._state if state is None else state
         keys = list(state.tracks)
         predicted = self._mhf.predict(state, keys, at)
         if self._mhf.mht:
             future = at if state.time is not None and at > state.time else state.time or at
-            # past the last scan nothing says what the sources reported: the classes'
-            # rates only, not the rates the sources were observed to report at
-            existence, log_q = self._mhf.existence_at(state, predicted, future, observed=False)
-            clusters: tuple[Cluster, ...] = (
-                self._mhf.undetected(state.clusters, log_q, state.tracks)
-                if log_q
-                else state.clusters
-            )
+            # past the last scan no scan has missed anything: objects only leave at
+            # their leave rates (no missed-detection term, no weight changes)
+            existence, _ = self._mhf.existence_at(state, predicted, future)
+            clusters: tuple[Cluster, ...] = state.clusters
             # Python floats: the sums below stay floats (numpy scalars are slower, and
             # made the published existence an np.float64 when it was below 1)
-            inside = inside_probability(
-                predicted.position, predicted.position_covariance, self._knowledge.world.region
-            ).tolist()
+            inside = self._mhf.inside(predicted).tolist()
         else:
             existence = dict.fromkeys(keys, 1.0)
             clusters = state.clusters
@@ -1167,11 +1248,13 @@ class WorldModel:
             raise ValueError(
                 f"unknown confidence state {bad[0]!r}; known: {', '.join(CONFIDENCE_STATES)}"
             )
-        state = self._state
-        at = time if time is not None else state.time
+        at = time if time is not None else self._state.time
         if at is None or not math.isfinite(at):
             return WorldState(time=at, objects=())
-        marginals, predicted = self._marginals(at)
+        state, book = self._as_of(at)
+        if state.time is None:  # before the first scan
+            return WorldState(time=at, objects=())
+        marginals, predicted = self._marginals(at, state)
         if self._mhf.mht:
             marginals = self._same_objects(
                 marginals, predicted.position, predicted.position_covariance
@@ -1199,7 +1282,7 @@ class WorldModel:
                 and float(np.linalg.norm(position - np.asarray(near[:dim]))) > near[dim]
             ):
                 continue
-            obj = self._world_object(track, predicted, i, marginal.existence, at, rows)
+            obj = self._world_object(track, predicted, i, marginal.existence, at, rows, book)
             if states is not None and (
                 obj.confidence is None or obj.confidence.state not in states
             ):
@@ -1220,8 +1303,10 @@ class WorldModel:
         existence: float,
         at: float,
         rows: tuple[list[list[float]], list[list[list[float]]]],
+        book: ConfidenceBook | None = None,
     ) -> WorldObject:
-        """``rows``: every prediction's position and covariance as Python floats."""
+        """``rows``: every prediction's position and covariance as Python floats;
+        ``book``: the confidences to read (default: the current ones)."""
         dim = self._knowledge.world.dimension
         mean = predicted.state_mean[i]
         flt = self._mhf.factory.filter_for(track.cls)
@@ -1255,13 +1340,15 @@ class WorldModel:
                 if self._mhf.mht
                 else None
             ),
-            confidence=self.confidence_of(track, at) if self._mhf.mht else None,
+            confidence=self.confidence_of(track, at, book) if self._mhf.mht else None,
         )
 
-    def confidence_of(self, track: Track, time: float) -> Confidence:
+    def confidence_of(
+        self, track: Track, time: float, book: ConfidenceBook | None = None
+    ) -> Confidence:
         """An object's confidence (paper 004) at ``time``: :mod:`semwm.confidence`."""
         spec = self._knowledge.classes[track.cls]
-        value = self._book.at(track.lineage, time, spec)
+        value = (self._book if book is None else book).at(track.lineage, time, spec)
         return Confidence(value, state_of(value, spec))
 
     def hypotheses(self, k: int = 10) -> list[HypothesisSummary]:

@@ -29,6 +29,7 @@ from api.schemas import (
     MessageOut,
     SensorIn,
     ValidationErrorOut,
+    ingest_out,
 )
 from api.service import COMMIT_HEADER, Committed, WorldBusy, WorldService
 from semwm import IngestResult
@@ -178,7 +179,7 @@ async def post_detections(
     if committed.replayed:
         headers["Idempotent-Replayed"] = "true"
     result = committed.value
-    answer = IngestOut(applied=result.applied, time=result.time, ignored=result.ignored)
+    answer = ingest_out(result)
     return Response(answer.model_dump_json(), media_type="application/json", headers=headers)
 
 

@@ -33,6 +33,16 @@ _INVALID: dict[int | str, dict[str, Any]] = {
 }
 
 
+_PAST: dict[int | str, dict[str, Any]] = {
+    **_INVALID,
+    409: {
+        "model": MessageOut,
+        "description": "time is before the newest scan and older than the reorder history "
+        "remembers: the world as it was then is not known",
+    },
+}
+
+
 def parse_near(near: str) -> tuple[float, ...]:
     """``"x,y,r"`` or ``"x,y,z,r"`` as numbers (422 on anything else)."""
     parts = [p.strip() for p in near.split(",")]
@@ -55,7 +65,7 @@ def parse_near(near: str) -> tuple[float, ...]:
 
 
 @router.get(
-    "/world", response_model=WorldOut, summary="The objects of the world", responses=_INVALID
+    "/world", response_model=WorldOut, summary="The objects of the world", responses=_PAST
 )
 def get_world(
     world: WorldDep,
@@ -109,7 +119,7 @@ def get_world(
     "/world/objects/{object_id}",
     response_model=WorldObjectOut,
     summary="One object of the world",
-    responses={404: {"model": MessageOut, "description": "No such object"}, **_INVALID},
+    responses={404: {"model": MessageOut, "description": "No such object"}, **_PAST},
 )
 def get_object(
     world: WorldDep,

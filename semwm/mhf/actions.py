@@ -82,6 +82,7 @@ def kicked_version(mhf: MultipleHypothesisFilter, state: MHFState, key: int, kic
         created=track.created,
         rate=track.rate,
         class_probs=track.class_probs,
+        sources=track.sources,
     )
 
 
@@ -111,6 +112,7 @@ def apply_kick(mhf: MultipleHypothesisFilter, state: MHFState, kick: Kick) -> MH
             version.created,
             version.rate,
             version.class_probs,
+            version.sources,
         )
         tracks[new.key] = new
         existence[new.key] = state.existence.get(key, 1.0)

@@ -259,6 +259,7 @@ class Associator:
                 m.time,
                 classes[cls].detection_frequency,
                 class_probs,
+                frozenset((m.source or "",)),
             )
             result.append(
                 DetectionOptions(
@@ -505,6 +506,9 @@ class Associator:
                     old.created,
                     rate,
                     class_probs,
+                    old.sources
+                    if (m.source or "") in old.sources
+                    else old.sources | {m.source or ""},
                 )
                 f_existing = old.rate if detection_rates is None else detection_rates[m.detector][i]
                 log_num = _log(f_existing) + math.log(lik) + log_l
@@ -605,3 +609,8 @@ class Associator:
 def _distance(z: FloatArray, position: Sequence[float]) -> float:
     offset = z - np.asarray(position, dtype=float)
     return math.sqrt(float(offset @ offset))  # what np.linalg.norm computes
+
+
+def _with_source(sources: frozenset[str], source: str) -> frozenset[str]:
+    """``sources`` and ``source`` (the same set when it holds it: no new set per update)."""
+    return sources if source in sources else sources | {source}

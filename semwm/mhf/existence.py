@@ -33,7 +33,7 @@ from collections.abc import Collection, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.special import ndtr
+from scipy.special import chdtri, ndtr
 
 from semwm.filters.motion import FloatArray
 from semwm.mhf.measurement import SensorView
@@ -73,22 +73,58 @@ def survive(
 
 
 def inside_probability(
-    position: FloatArray, covariance: FloatArray, region: Region | None
+    position: FloatArray,
+    covariance: FloatArray,
+    region: Region | None,
+    margin: FloatArray | None = None,
 ) -> FloatArray:
-    """Probability that each object lies inside ``region`` (axis-aligned box), from its
+    r"""Probability that each object lies inside ``region`` (axis-aligned box), from its
     Gaussian position estimate, per axis independently (the marginals).
 
     ``position`` ``(N, d)``, ``covariance`` ``(N, d, d)``; all ones without a region.
+
+    ``margin`` ``(N, d)`` (m): the region is a soft fact. It is where the robot works,
+    drawn on a floor plan; an object on its edge (a table top at the region's floor,
+    a shelf on its wall) is reported half outside by a sensor with noise, and its
+    estimate's spread says nothing about which side it stands on. Each axis's bounds
+    are widened by the object's class's measurement noise at the gate's quantile
+    (:func:`region_margins`), so an object within the noise of the edge counts as
+    inside and only what is clearly outside is out:
+
+    .. math::
+       P(	ext{inside}) = \prod_i \Phi\Big(rac{b_i + m_i - x_i}{\sigma_i}\Big)
+                        - \Phi\Big(rac{a_i - m_i - x_i}{\sigma_i}\Big)
     """
     count = position.shape[0]
     if region is None or count == 0:
         return np.ones(count)
     corners = _corners(region)  # (2, d): upper, lower
     sigma = np.sqrt(np.maximum(covariance.diagonal(axis1=1, axis2=2), 1e-18))
+    if margin is not None:  # (N, 2, d): upper + m, lower - m
+        bounds = corners[None, :, :] + np.stack((margin, -margin), axis=1)
+    else:
+        bounds = corners[None, :, :]
     # one normal CDF call for both corners: (N, 2, d)
-    below = ndtr((corners - position[:, None, :]) / sigma[:, None, :])
+    below = ndtr((bounds - position[:, None, :]) / sigma[:, None, :])
     per_axis = below[:, 0] - below[:, 1]  # in [0, 1]: the CDF is monotone
     result: FloatArray = np.minimum(np.maximum(per_axis, 0.0), 1.0).prod(axis=1)
+    return result
+
+
+def region_margins(noise: FloatArray, gate_probability: float) -> FloatArray:
+    r"""How far outside the region (m, per axis) an object still counts as on its edge:
+    the measurement noise's standard deviation at the gate's one-dimensional quantile,
+
+    .. math:: m_i = \sqrt{\gamma\, R_{ii}}, \qquad \gamma = \chi^2_1(p_{gate})
+
+    ``noise`` ``(N, d, d)``: each object's class's measurement noise ``R``; returns
+    ``(N, d)``. The same margin decides which detections are clearly outside the
+    region (:func:`semwm.validation.outside_region`).
+    """
+    if noise.shape[0] == 0:
+        return np.zeros((0, noise.shape[-1]))
+    gamma = chdtri(1, 1.0 - gate_probability) if gate_probability < 1.0 else 0.0
+    result: FloatArray = np.sqrt(gamma * np.maximum(noise.diagonal(axis1=1, axis2=2), 0.0))
     return result
 
 

@@ -31,15 +31,16 @@ from dataclasses import replace
 import numpy as np
 
 from semwm.filters.factory import FilterFactory
+from semwm.filters.motion import FloatArray
 from semwm.filters.small import largest_eigenvalue
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf.association import Associator, DetectionOptions, SettledUpdate
-from semwm.mhf.existence import looked_at, near_rate, survive
+from semwm.mhf.existence import looked_at, near_rate, region_margins, survive
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted, predict_tracks
 from semwm.mhf.prune import log_add, merge, prune
-from semwm.mhf.rates import ObservedRates
+from semwm.mhf.rates import ObservedRates, ScanCoverage
 from semwm.mhf.similar import merge_similar
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
 
@@ -132,14 +133,8 @@ class MultipleHypothesisFilter:
         self.missed_detections = self.mht and world.missed_detection_term
         self.observed_rates = self.mht and world.observed_detection_rates
         self.merge_distance = world.merge_distance if self.mht else 0.0
-        ranges = [d.range for d in knowledge.detectors.values()]
-        # coverage is known only when every detector has a range (semwm.mhf.rates)
-        self.sensor_reach = (
-            max(r for r in ranges if r is not None)
-            if ranges and all(r is not None for r in ranges)
-            else None
-        )
         self.region = world.region
+        self._margins: dict[str, FloatArray] = {}
         # per class: (P_max, longest time unseen), infinite when the class sets none
         self._limits = {
             name: (
@@ -162,47 +157,69 @@ class MultipleHypothesisFilter:
     def predict(self, state: MHFState, keys: Sequence[int], time: float) -> Predicted:
         return predict_tracks([state.tracks[k] for k in keys], time, self.factory)
 
-    def rates(
-        self,
-        predicted: Predicted,
-        observed: ObservedRates | None = None,
-        start: float = 0.0,
-        end: float = 0.0,
-        excess: bool = True,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Leave rates mu and detection rates f (Hz) of predicted objects (``mht``).
-
-        mu: the class's ``leave_frequency``, or a disappearance relation's rate near its
-        target; f: the class's ``detection_frequency`` (raised to the rate the sources
-        are observed to report the object at over ``[start, end]``,
-        :mod:`semwm.mhf.rates`; not with ``excess`` false) times the probability that
-        the object is inside the region (no sensor sees outside it), 0 without the
-        missed-detection term.
-        """
+    def leave_rates(self, predicted: Predicted) -> FloatArray:
+        """Leave rates mu (Hz) of predicted objects (``mht``): the class's
+        ``leave_frequency``, or a disappearance relation's rate near its target."""
         classes = self.knowledge.classes
         mu = np.array([classes[t.cls].leave_frequency for t in predicted.tracks], dtype=float)
         for i, t in enumerate(predicted.tracks):
             relations = self._leave_relations[t.cls]
             if relations:  # near a target it leaves by (paper 002 eq. 4, mirrored)
                 mu[i] = near_rate(predicted.position[i], float(mu[i]), relations)
-        if not self.missed_detections:
-            return mu, np.zeros(len(predicted.tracks))
-        inside = predicted.inside_region(self.region)
-        f = self.class_rates(predicted.tracks)
-        if observed is not None and self.observed_rates:
-            f = f * observed.covered(predicted.position, self.sensor_reach, start, end)
-            if excess:
-                f = observed.over(
-                    [t.lineage for t in predicted.tracks],
-                    f,
-                    start,
-                    end,
-                    [t.cls for t in predicted.tracks],
-                    _unconfirmed(predicted.tracks),
-                    predicted.position,
-                    self.sensor_reach,
-                )
-        return mu, f * inside
+        return mu
+
+    def miss_rates(
+        self, observed: ObservedRates, predicted: Predicted, scan: ScanCoverage
+    ) -> FloatArray:
+        """Detection rates f (Hz) with which the scan ``scan`` misses each predicted object
+        (``mht``, :meth:`ObservedRates.watched`): the rate of the scan's source
+        (:meth:`ObservedRates.source_rates`; the class's ``detection_frequency`` without
+        observed rates) for the objects it could have seen, times the probability that
+        the object is inside the region; 0 for every other object."""
+        tracks = predicted.tracks
+        watched = observed.watched(
+            scan,
+            [t.sources for t in tracks],
+            predicted.position,
+            self.region_margins(tracks),
+            _unconfirmed(tracks),
+        )
+        if not watched.any():
+            return np.zeros(len(tracks))
+        f = self.class_rates(tracks)
+        if self.observed_rates:
+            f = observed.source_rates(
+                scan.source, [t.lineage for t in tracks], f, [t.cls for t in tracks]
+            )
+        result: FloatArray = f * watched * self.inside(predicted)
+        return result
+
+    def inside(self, predicted: Predicted) -> FloatArray:
+        """Each predicted object's probability of being inside the region, widened by its
+        class's measurement noise (:func:`semwm.mhf.existence.inside_probability`)."""
+        return predicted.inside_region(self.region, self.region_margins(predicted.tracks))
+
+    def region_margins(self, tracks: Sequence[Track]) -> FloatArray:
+        """``(N, d)``: each object's region margin (:func:`region_margins`), from its
+        class's measurement noise for the default detector (zero for a class since
+        removed)."""
+        dim = self.factory.dim
+        if not tracks:
+            return np.zeros((0, dim))
+        margins = self._margins
+        rows = []
+        for t in tracks:
+            row = margins.get(t.cls)
+            if row is None:
+                if t.cls in self.knowledge.classes:
+                    R = self.factory.measurement_noise(t.cls, self.knowledge.default_detector)
+                    p = self.knowledge.world.gate_probability
+                    row = region_margins(R[None, :dim, :dim], p)[0]
+                else:
+                    row = np.zeros(dim)
+                margins[t.cls] = row
+            rows.append(row)
+        return np.stack(rows)
 
     def class_rates(self, tracks: Sequence[Track]) -> np.ndarray:
         """Each object's class ``detection_frequency`` (Hz)."""
@@ -210,23 +227,43 @@ class MultipleHypothesisFilter:
         return np.array([classes[t.cls].detection_frequency for t in tracks], dtype=float)
 
     def existence_at(
-        self, state: MHFState, predicted: Predicted, time: float, observed: bool = True
+        self,
+        state: MHFState,
+        predicted: Predicted,
+        time: float,
+        scan: ScanCoverage | None = None,
     ) -> tuple[dict[int, float], dict[int, float]]:
-        """Existence of every predicted version at ``time`` (>= ``state.time``) with no
-        detection since ``state.time``, and the log missed-detection likelihood of each.
-        ``observed``: with the rates observed on the sources' streams (a scan at
-        ``time`` said what they reported); else with the classes' rates (a query)."""
-        r = np.array([state.existence.get(t.key, 1.0) for t in predicted.tracks])
-        if not self.mht or state.time is None or time <= state.time or not predicted.tracks:
-            keys = [t.key for t in predicted.tracks]
+        """Existence of every predicted version at ``time`` (>= ``state.time``), and the
+        log missed-detection likelihood of each (docs/knowledge.md, "What semwm
+        concludes from not seeing something").
+
+        Objects leave at their leave rate over the time since ``state.time``
+        (:func:`survive` with no detection rate: no evidence, ``q = 1``). Absence is
+        evidence only from a scan that could have seen the object: with ``scan`` (a
+        scan without a sensor view, made at ``time``), the objects its source could
+        have seen (:meth:`miss_rates`) are missed at its rate over the time since the
+        source's previous scan (:meth:`ObservedRates.miss_span`). Without ``scan`` (a
+        query, or a scan whose sensor view decides, :func:`looked_at`) nothing is
+        missed: silence and time alone are never a miss.
+        """
+        tracks = predicted.tracks
+        keys = [t.key for t in tracks]
+        r = np.array([state.existence.get(k, 1.0) for k in keys])
+        if not self.mht or state.time is None or not tracks:
             return dict(zip(keys, r.tolist(), strict=True)), {}
-        mu, f = self.rates(predicted, state.observed, state.time, time, excess=observed)
-        r_new, log_q = survive(r, mu, f, time - state.time)
-        keys = [t.key for t in predicted.tracks]
-        return (
-            dict(zip(keys, r_new.tolist(), strict=True)),
-            dict(zip(keys, log_q.tolist(), strict=True)),
-        )
+        if time > state.time:
+            mu = self.leave_rates(predicted)
+            if mu.any():
+                r, _ = survive(r, mu, np.zeros(len(keys)), time - state.time)
+        log_q: dict[int, float] = {}
+        if scan is not None and self.missed_detections:
+            span = state.observed.miss_span(scan.source, time)
+            if span > 0.0:
+                f = self.miss_rates(state.observed, predicted, scan)
+                if f.any():
+                    r, q = survive(r, np.zeros(len(keys)), f, span)
+                    log_q = dict(zip(keys, q.tolist(), strict=True))
+        return dict(zip(keys, r.tolist(), strict=True)), log_q
 
     def leaving(
         self, predicted: Predicted, time: float, existence: Mapping[int, float] | None = None
@@ -242,7 +279,7 @@ class MultipleHypothesisFilter:
         drop = np.array([t.cls not in classes for t in tracks])  # a class since removed
         if self.mht and existence is not None:
             r = np.array([existence.get(t.key, 1.0) for t in tracks])
-            drop |= r * predicted.inside_region(self.region) < self.removal_existence
+            drop |= r * self.inside(predicted) < self.removal_existence
         finite = np.all(np.isfinite(predicted.position_covariance), axis=(1, 2))
         drop |= ~finite
         covariance = np.where(finite[:, None, None], predicted.position_covariance, 0.0)
@@ -270,7 +307,8 @@ class MultipleHypothesisFilter:
         time = measurements[0].time if measurements else view.time  # type: ignore[union-attr]
         keys = list(state.tracks)
         predicted = self.predict(state, keys, time)
-        existence, log_q = self.existence_at(state, predicted, time)
+        scan = self._coverage(measurements) if view is None and measurements else None
+        existence, log_q = self.existence_at(state, predicted, time, scan)
         clusters: Sequence[Cluster] = state.clusters
         if log_q:
             clusters = self.undetected(clusters, log_q, state.tracks)
@@ -335,9 +373,25 @@ class MultipleHypothesisFilter:
         tracks = {k: table.tracks[k] for k in referenced}
         kept = {k: table.existence.get(k, 1.0) for k in referenced}
         observed = state.observed
-        if self.observed_rates and measurements:
-            observed = self._observe(observed, state.tracks, options, final, table, time)
+        if (self.observed_rates or self.missed_detections) and measurements:
+            span = _span(scan.positions) if scan is not None else None
+            observed = self._observe(observed, state.tracks, options, final, table, time, span)
         return MHFState(final, tracks, time, table.next_key, kept, observed)
+
+    def _coverage(self, measurements: Sequence[Measurement]) -> ScanCoverage:
+        """What the scan (no sensor view) tells about where its source looked."""
+        first = measurements[0]
+        detectors = self.knowledge.detectors
+        ranges = [detectors[d].range for d in {m.detector for m in measurements}]
+        reach = (
+            max(r for r in ranges if r is not None) if all(r is not None for r in ranges) else None
+        )
+        return ScanCoverage(
+            first.source or "",
+            np.array([m.z for m in measurements], dtype=float),
+            first.sensor,
+            reach,
+        )
 
     def _settleable(self, clusters: Sequence[Cluster]) -> dict[int, float] | None:
         """Object key -> log weight of its cluster's only hypothesis, for the objects alone
@@ -399,6 +453,7 @@ class MultipleHypothesisFilter:
         final: Sequence[Cluster],
         table: _TrackTable,
         time: float,
+        span: float | None = None,
     ) -> ObservedRates:
         """The observed rates after the scan: per detector, which objects its detections
         updated or started in the most probable hypothesis (:mod:`semwm.mhf.rates`), and
@@ -438,7 +493,7 @@ class MultipleHypothesisFilter:
         source = (first.source or "") if first is not None else ""
         sensor = None if first is None or first.sensor is None else tuple(first.sensor.tolist())
         return observed.after_scan(
-            source, time, detected, born, alive, sensor, classes, born_elsewhere
+            source, time, detected, born, alive, sensor, classes, born_elsewhere, span
         )
 
     def undetected(
@@ -790,3 +845,12 @@ def _without(
 def _unconfirmed(tracks: Sequence[Track]) -> list[bool]:
     """Per version: no detection since the one that started it."""
     return [t.last_seen <= t.created for t in tracks]
+
+
+def _span(positions: FloatArray) -> float | None:
+    """The diagonal (m) of the box around a scan's detections; ``None`` for fewer than
+    two (:attr:`semwm.mhf.rates.SourceClock.span`)."""
+    if positions.shape[0] < 2:
+        return None
+    extent = positions.max(axis=0) - positions.min(axis=0)
+    return float(np.sqrt(extent @ extent))

@@ -107,13 +107,14 @@ class Predicted:
         """Each track's combined state mean ``(n,)``."""
         return self._rows(3)
 
-    def inside_region(self, region: Region | None) -> FloatArray:
-        """Each object's probability of being inside ``region``
-        (:func:`semwm.mhf.existence.inside_probability`), computed once per region."""
+    def inside_region(self, region: Region | None, margin: FloatArray | None = None) -> FloatArray:
+        """Each object's probability of being inside ``region`` widened by ``margin``
+        ``(N, d)`` (:func:`semwm.mhf.existence.inside_probability`), computed once per
+        region (one caller passes one object's margins: its class's)."""
         known = self._inside.get(region)
         if known is None:
             known = self._inside[region] = inside_probability(
-                self.position, self.position_covariance, region
+                self.position, self.position_covariance, region, margin
             )
         return known
 

@@ -37,14 +37,17 @@ the class's. With the class rate :math:`f_c`:
 .. math::
    f_{s,d}(o) = \max(f_c, g_{s,d}) \text{ if } (s, d) \text{ sees } o, \text{ else } f_c
 
-   f(o) = f_c + \sum_{(s,d) \text{ sees } o} (g_{s,d} - f_c)^+
+   f_s(o) = \max\big(f_c, \max_{d:\,(s,d) \text{ detected } o} g_{s,d}\big)
 
 :math:`f_{s,d}(o)` is the rate of an existing object in the association weight of a
-detection from ``(s, d)`` (:mod:`semwm.mhf.association`) and :math:`f(o)` the rate
-in the missed-detection term (:mod:`semwm.mhf.existence`), so the two stay one
+detection from ``(s, d)`` (:mod:`semwm.mhf.association`) and :math:`f_s(o)` the rate
+at which a scan of source ``s`` that could have seen the object misses it
+(:meth:`ObservedRates.watched`, :meth:`ObservedRates.source_rates`; issue 28: absence
+is evidence only from a scan that could have seen the object), so the two stay one
 Poisson model. With one source that reports at the knowledge's rate this is the
 knowledge's model (``g = f_c``); the knowledge's rate is a floor, never lowered.
-World setting ``observed_detection_rates: false`` turns this off.
+World setting ``observed_detection_rates: false`` turns the observed rates off (the
+sources' clocks and spans, which say where they look, are kept).
 """
 
 from __future__ import annotations
@@ -53,6 +56,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from semwm.filters.motion import FloatArray
 
@@ -72,12 +76,31 @@ its last detection of it."""
 INTERVAL_WEIGHT = 0.1
 """Weight of the newest interval in a source's mean interval between scans."""
 
-STALE_INTERVALS = 10.0
-"""A source that has not scanned for this many of its mean intervals no longer counts
-for coverage."""
-
 DISCOUNT = 0.98
 """Per scan of its source, the weight kept by a stream's hit and miss counts."""
+
+SPAN_WEIGHT = 0.1
+"""Weight of the newest scan in a source's moving average of its scans' spans."""
+
+MAX_MISS_INTERVALS = 2.0
+"""A scan counts as a miss for at most this many of its source's mean intervals since
+the source's previous scan: a source that was silent longer did not keep looking."""
+
+
+@dataclass(frozen=True, slots=True)
+class ScanCoverage:
+    """What one scan without a sensor view tells about where its source looked.
+
+    ``source``: its source (``""`` for none); ``positions`` ``(M, d)``: its
+    detections' positions; ``sensor``: where its sensor was (the detections'
+    ``sensor_position``), if given; ``reach``: the largest ``range`` of its
+    detectors, if every one of them has one.
+    """
+
+    source: str
+    positions: FloatArray
+    sensor: FloatArray | None = None
+    reach: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,25 +114,11 @@ class SourceClock:
     interval: float | None = None
     position: tuple[float, ...] | None = None
     speed: float = 0.0
-
-    def in_view_until(self, distances: FloatArray, reach: float) -> FloatArray:
-        """Until when objects ``distances`` (m) from the sensor's last position are
-        surely in its view (``-inf``: not in it).
-
-        The last position holds for one mean interval, when the next scan is due.
-        Past it, a silent source may have moved on at its speed in any direction, so
-        only objects within ``reach - speed * (t - last_time - interval)`` are surely
-        in view: a patrolling robot whose detector reports nothing in some frames
-        does not deny what it has left behind. A sensor that stands still keeps its
-        view.
-        """
-        due = self.last_time + (self.interval or 0.0)
-        inside = distances <= reach
-        if self.speed <= 0.0:
-            return np.where(inside, np.inf, -np.inf)
-        result: FloatArray = np.where(inside, due + (reach - distances) / self.speed, -np.inf)
-        return result
-
+    span: float = 0.0
+    """How far apart (m) the source reports things in one scan: a moving average of
+    the diagonal of the box around each scan's detections (scans of two or more): a
+    lower bound of its view's size, the neighbourhood it watches around what it
+    reports (:meth:`ObservedRates.watched`)."""
 
 @dataclass(frozen=True, slots=True)
 class StreamCounts:
@@ -150,49 +159,96 @@ class ObservedRates:
         prior = 0.5 if class_rate is None else min(1.0, class_rate * clock.interval)
         return counts.detection_probability(prior) / clock.interval
 
-    def covered(
-        self, positions: FloatArray, reach: float | None, start: float, end: float | None = None
-    ) -> FloatArray:
-        """``(N,)``: the part of ``[start, end]`` (default: the instant ``start``) in
-        which an object at ``positions`` ``(N, d)`` is surely in some source's view
-        (the class rate applies only then).
+    def miss_span(self, source: str, time: float) -> float:
+        """s: how long before ``time`` a scan of ``source`` says it kept looking: the
+        time since its previous scan, at most :data:`MAX_MISS_INTERVALS` of its mean
+        interval (the whole time for its second scan, which sets that interval); 0 for
+        its first."""
+        clock = self.sources.get(source)
+        if clock is None or time <= clock.last_time:
+            return 0.0
+        step = time - clock.last_time
+        return step if clock.interval is None else min(step, MAX_MISS_INTERVALS * clock.interval)
 
-        Coverage is known only when every detector has a ``range`` (``reach``: the
-        largest) and every source gave its sensor position (one without a position
-        that scanned within :data:`STALE_INTERVALS` of its intervals makes every
-        object count as seen: all ones, as before any source has scanned twice). A
-        source that gave positions never goes stale: standing still, it keeps its view
-        (silence there means it saw nothing); moving, its view shrinks to nothing.
-        Then an object is in a source's view while it is within ``reach`` of the
-        source's last position, shrinking once the source is overdue at the speed it
-        moved (:meth:`SourceClock.in_view_until`); in nobody's view, it gets 0.
+    def watched(
+        self,
+        scan: ScanCoverage,
+        sources: Sequence[frozenset[str]],
+        positions: FloatArray,
+        margins: FloatArray,
+        unconfirmed: Sequence[bool],
+    ) -> npt.NDArray[np.bool_]:
+        """``(N,)``: which objects the scan could have seen, so that not reporting them
+        is evidence that they are gone (docs/knowledge.md, "What semwm concludes from
+        not seeing something").
+
+        * The scan gave its sensor's position and every detector of it has a
+          ``range``: the objects within that range of the sensor.
+        * Otherwise the source's coverage is learnt from what it reports: an object
+          the source has itself detected (``sources``: each object version's
+          :attr:`~semwm.mhf.state.Track.sources`), and either near what this scan
+          reports (within the source's :attr:`SourceClock.span`, at least the
+          object's ``margins``: the gate's quantile of its measurement noise), or
+          reported once and never confirmed (a lone false alarm is denied by the
+          sensor that made it, while that sensor keeps scanning).
+
+        An object another source found, or that this source found elsewhere than it
+        now looks, is not watched: a scan from elsewhere is never a miss.
         """
-        count = positions.shape[0]
-        everywhere = np.ones(count)
-        if reach is None or count == 0:
-            return everywhere
-        clocks = []
-        for clock in self.sources.values():
-            if clock.interval is None:
-                continue
-            if clock.position is None:
-                if start - clock.last_time <= STALE_INTERVALS * clock.interval:
-                    return everywhere
-                continue
-            clocks.append(clock)
-        if not clocks:  # no source has scanned twice yet
-            return everywhere
-        until = np.full(count, -np.inf)
-        for clock in clocks:
-            at = np.asarray(clock.position, dtype=float)[: positions.shape[1]]
-            offset = positions[:, : at.shape[0]] - at
-            distances = np.sqrt(np.einsum("nd,nd->n", offset, offset))
-            until = np.maximum(until, clock.in_view_until(distances, reach))
-        if end is None or end <= start:
-            result: FloatArray = (until >= start).astype(float)
+        count = len(sources)
+        if count == 0:
+            return np.zeros(0, dtype=bool)
+        if scan.sensor is not None and scan.reach is not None:
+            k = min(positions.shape[1], scan.sensor.shape[0])
+            offset = positions[:, :k] - scan.sensor[:k]
+            inside: npt.NDArray[np.bool_] = (
+                np.einsum("nd,nd->n", offset, offset) <= scan.reach * scan.reach
+            )
+            return inside
+        source = scan.source
+        by_source = np.fromiter((source in s for s in sources), dtype=bool, count=count)
+        if not by_source.any():
+            return by_source
+        clock = self.sources.get(source)
+        span = clock.span if clock is not None else 0.0
+        radius = np.maximum(span, margins.max(axis=1) if margins.size else 0.0)
+        near = np.zeros(count, dtype=bool)
+        if scan.positions.shape[0]:
+            rows = np.flatnonzero(by_source)
+            d = min(positions.shape[1], scan.positions.shape[1])
+            nearest = _nearest_distance(positions[rows, :d], scan.positions[:, :d])
+            near[rows] = nearest <= radius[rows]
+        result: npt.NDArray[np.bool_] = by_source & (near | np.asarray(unconfirmed, dtype=bool))
+        return result
+
+    def source_rates(
+        self,
+        source: str,
+        lineages: Sequence[int],
+        class_rates: FloatArray,
+        classes: Sequence[str],
+    ) -> FloatArray:
+        """``(N,)``: the rate (Hz) at which ``source`` reports each object while it sees
+        it: the class's rate, raised to the observed rate of any of the source's
+        detectors that has detected the object (:math:`f_{s,d}(o)`, the missed-detection
+        rate of one source)."""
+        result = np.array(class_rates, dtype=float, copy=True)
+        if not self.seen:
             return result
-        fraction: FloatArray = np.clip((until - start) / (end - start), 0.0, 1.0)
-        return fraction
+        base = result.tolist()
+        rates: dict[CountKey, float] = {}
+        never: Mapping[StreamKey, float] = {}
+        for i, lineage in enumerate(lineages):
+            for stream in self.seen.get(lineage, never):
+                if stream[0] != source:
+                    continue
+                key = (stream[0], stream[1], classes[i])
+                g = rates.get(key)
+                if g is None:
+                    g = rates[key] = self.rate(stream, classes[i], base[i])
+                if g > result[i]:
+                    result[i] = g
+        return result
 
     def from_stream(
         self,
@@ -237,86 +293,6 @@ class ObservedRates:
         result: FloatArray = np.where(sees, np.maximum(class_rates, g), class_rates)
         return result
 
-    def over(
-        self,
-        lineages: Sequence[int],
-        class_rates: FloatArray,
-        start: float,
-        end: float,
-        classes: Sequence[str] | None = None,
-        unconfirmed: Sequence[bool] | None = None,
-        positions: FloatArray | None = None,
-        reach: float | None = None,
-    ) -> FloatArray:
-        """:math:`f(o)` of each object averaged over ``[start, end]`` (Hz): a stream
-        counts for the part of the interval in which it still sees the object.
-        ``classes``: each object's class (else one count for all).
-
-        ``unconfirmed``: objects that have had no detection but the one that started
-        them. The stream that started one sees it for as long as its source keeps
-        scanning and the object is within ``reach`` (m) of the source's sensor
-        (``positions``: the objects' ``(N, d)``; unknown reach or sensor position:
-        anywhere), not only for the window: an object that it reported once and never
-        again where it keeps looking is most likely its false alarm (a team's 4-sigma
-        outlier), and would otherwise fade at the class's rate for seconds."""
-        result = np.array(class_rates, dtype=float, copy=True)
-        span = end - start
-        if not self.seen or span <= 0.0:
-            return result
-        base = result.tolist()
-        rates: dict[tuple[str, str, str], float] = {}
-        done: dict[tuple[int, str, float], float] = {}
-        seen = self.seen
-        for i, lineage in enumerate(lineages):
-            entries = seen.get(lineage)
-            if not entries:
-                continue
-            cls = "" if classes is None else classes[i]
-            rate = base[i]
-            single = unconfirmed is not None and bool(unconfirmed[i])
-            # versions of one object share it; not an unconfirmed one, whose reach is
-            # judged from its own position
-            extra = None if single else done.get((lineage, cls, rate))
-            if extra is None:
-                extra = 0.0
-                for stream, last in entries.items():
-                    key = (stream[0], stream[1], cls)
-                    g = rates.get(key)
-                    if g is None:
-                        g = rates[key] = self.rate(stream, cls, rate if cls else None)
-                    if g <= rate:
-                        continue
-                    until = last + WINDOW_DETECTIONS / g
-                    if single and self._in_reach(stream[0], positions, i, reach):
-                        until = max(until, self.scanning_until(stream[0]))
-                    if until > start:
-                        extra += (g - rate) * min((until - start) / span, 1.0)
-                if not single:
-                    done[(lineage, cls, rate)] = extra
-            if extra:
-                result[i] += extra
-        return result
-
-    def _in_reach(
-        self, source: str, positions: FloatArray | None, row: int, reach: float | None
-    ) -> bool:
-        """Whether object ``row`` (of ``positions``) is within ``reach`` of ``source``'s
-        sensor as it last scanned (true when either is unknown)."""
-        clock = self.sources.get(source)
-        if reach is None or positions is None or clock is None or clock.position is None:
-            return True
-        at = np.asarray(clock.position[: positions.shape[1]], dtype=float)
-        offset = positions[row, : at.shape[0]] - at
-        return float(offset @ offset) <= reach * reach
-
-    def scanning_until(self, source: str) -> float:
-        """Until when ``source`` counts as scanning: :data:`STALE_INTERVALS` of its mean
-        intervals after its last scan (``-inf`` before its second scan)."""
-        clock = self.sources.get(source)
-        if clock is None or not clock.interval:
-            return -np.inf
-        return clock.last_time + STALE_INTERVALS * clock.interval
-
     def after_scan(
         self,
         source: str,
@@ -327,6 +303,7 @@ class ObservedRates:
         position: tuple[float, ...] | None = None,
         classes: Mapping[int, str] | None = None,
         born_elsewhere: Mapping[str, Iterable[int]] | None = None,
+        span: float | None = None,
     ) -> ObservedRates:
         """The rates after one scan of ``source`` at ``time``.
 
@@ -340,26 +317,33 @@ class ObservedRates:
         stream sees them, but they are not counted: the counts follow the most
         probable account of what it detects). A lineage that only such a hypothesis
         holds (an outlier that the best one calls clutter) would otherwise be seen by
-        no stream and fade at the class's rate for seconds.
+        no stream and fade at the class's rate for seconds. ``span``: the diagonal of
+        the box around the scan's detections (``None``: fewer than two).
         """
         sources = dict(self.sources)
         clock = sources.get(source)
         if clock is None:
-            sources[source] = SourceClock(time, None, position)
-        elif time > clock.last_time:
-            step = time - clock.last_time
-            interval = (
-                step
-                if clock.interval is None
-                else (1.0 - INTERVAL_WEIGHT) * clock.interval + INTERVAL_WEIGHT * step
-            )
-            speed = clock.speed
-            if position is not None and clock.position is not None:
-                moved = np.subtract(position, clock.position)
-                speed = float(np.sqrt(moved @ moved)) / step
-            sources[source] = SourceClock(time, interval, position, speed)
+            sources[source] = SourceClock(time, None, position, 0.0, span or 0.0)
         else:
-            sources[source] = SourceClock(clock.last_time, clock.interval, position, clock.speed)
+            spread = clock.span
+            if span is not None:
+                spread = span if spread <= 0.0 else spread + SPAN_WEIGHT * (span - spread)
+            if time > clock.last_time:
+                step = time - clock.last_time
+                interval = (
+                    step
+                    if clock.interval is None
+                    else (1.0 - INTERVAL_WEIGHT) * clock.interval + INTERVAL_WEIGHT * step
+                )
+                speed = clock.speed
+                if position is not None and clock.position is not None:
+                    moved = np.subtract(position, clock.position)
+                    speed = float(np.sqrt(moved @ moved)) / step
+                sources[source] = SourceClock(time, interval, position, speed, spread)
+            else:
+                sources[source] = SourceClock(
+                    clock.last_time, clock.interval, position, clock.speed, spread
+                )
         streams = dict(self.streams)
 
         def class_of(lineage: int) -> str:
@@ -396,3 +380,15 @@ class ObservedRates:
                 if lineage in alive:
                     seen[lineage] = {**seen.get(lineage, {}), stream: time}
         return ObservedRates(sources, streams, seen)
+
+
+def _nearest_distance(points: FloatArray, targets: FloatArray) -> FloatArray:
+    """``(N,)``: each point's distance to the nearest of ``targets`` ``(M, d)``."""
+    if points.shape[0] * targets.shape[0] <= 65536:
+        offset = points[:, None, :] - targets[None, :, :]
+        result: FloatArray = np.sqrt(np.einsum("nmd,nmd->nm", offset, offset).min(axis=1))
+        return result
+    from scipy.spatial import cKDTree  # only large scans need it
+
+    distances, _ = cKDTree(targets).query(points, k=1)
+    return np.asarray(distances, dtype=float)

@@ -48,6 +48,10 @@ class Track:
     class_probs
         ``(K,)`` probability of each class of the knowledge (sorted by name) being
         its true class (:mod:`semwm.mhf.classes`).
+    sources
+        The sources whose detections this version took (its history's; ``""`` for
+        detections that name none): only their scans can miss it where no sensor view
+        says more (:meth:`semwm.mhf.rates.ObservedRates.watched`).
     """
 
     key: int
@@ -62,6 +66,7 @@ class Track:
     created: float
     rate: float
     class_probs: FloatArray
+    sources: frozenset[str] = frozenset()
 
     def relabeled(self, key: int, label: str | None) -> Track:
         return Track(
@@ -77,6 +82,7 @@ class Track:
             self.created,
             self.rate,
             self.class_probs,
+            self.sources,
         )
 
 

@@ -288,8 +288,7 @@ def run_team(
                 heapq.heappush(buffer, (placed[0].time, m.source, m.seq, placed))
         while buffer and buffer[0][0] <= now - hold + 1e-9:
             late += process(heapq.heappop(buffer)[3])
-        worlds.append(receiver.world(time=now) if receiver.latest_time is not None else
-                      WorldState(time=now, objects=()))  # fmt: skip
+        worlds.append(_world_at(receiver, now))
         cpu_global += clock.process_time() - start
 
     c = gospa_c if gospa_c is not None else float(str(scenario.metadata.get("gospa_c", 1.0)))
@@ -367,3 +366,15 @@ def mean_nees(truth: Sequence[TruthFrame], worlds: Sequence[WorldState]) -> floa
             P = np.asarray(state.objects[i].covariance)
             values.append(float(delta @ np.linalg.solve(P, delta)))
     return float(np.mean(values)) if values else None
+
+
+def _world_at(model: WorldModel, now: float) -> WorldState:
+    """The receiver's world for the frame at ``now``: predicted to ``now``, or, when its
+    newest scan is later (an unsynced clock stamped it in the future), as it stands,
+    scored at ``now`` (the past before the history is not known)."""
+    if model.latest_time is None:
+        return WorldState(time=now, objects=())
+    processed = model.processed_time
+    if processed is not None and processed > now:
+        return WorldState(time=now, objects=model.world(time=processed).objects)
+    return model.world(time=now)

@@ -156,7 +156,7 @@ def test_semwm_serve_command(knowledge_file: Path) -> None:
         too_big = httpx.post(f"{url}/detections", json={"detections": batch})
         assert too_big.status_code == 422  # SEMWM_MAX_BATCH=3 took effect
         ok = httpx.post(f"{url}/detections", json={"detections": batch[:3]})
-        assert ok.json() == {"applied": 3, "time": 1.0, "ignored": 0}
+        assert ok.json() == {"applied": 3, "time": 1.0, "ignored": 0, "ignored_detections": []}
         assert httpx.get(f"{url}/docs").status_code == 200
     finally:
         process.terminate()

@@ -43,15 +43,27 @@ def test_world_holds_every_object_with_its_fields(seeded: TestClient) -> None:
 
 def test_time_predicts_the_objects(seeded: TestClient) -> None:
     now = by_class(seeded.get("/world").json()["objects"])["Robot"]
-    # 2 s unseen at 10 Hz: the robot is now unlikely to exist (not listed by default)
+    # 2 s after the newest scan: no scan has missed the robot since, so it is predicted
+    # and only its leave rate lowers its existence (issue 28: the future applies no
+    # misses that never happened)
     later_body = seeded.get("/world", params={"time": 4.5}).json()
     assert later_body["time"] == 4.5
-    assert "Robot" not in by_class(later_body["objects"])
+    assert by_class(later_body["objects"])["Robot"]["existence"] > 0.5
     later_body = seeded.get("/world", params={"time": 2.7}).json()
     later = by_class(later_body["objects"])["Robot"]
     assert later["position"][0] > now["position"][0]  # type: ignore[index]
     assert later["covariance"][0][0] > now["covariance"][0][0]  # type: ignore[index]
     assert later["existence"] < now["existence"]  # type: ignore[operator]
+
+
+def test_a_time_before_the_history_is_a_409(seeded: TestClient) -> None:
+    """The world as it was before the reorder history is not known: 409 naming the
+    times, never the current world labelled with the past time."""
+    answer = seeded.get("/world", params={"time": 1.0})
+    assert answer.status_code == 409, answer.text
+    assert "reorder" in answer.json()["detail"]
+    assert seeded.get("/world/objects/1", params={"time": 1.0}).status_code == 409
+    assert seeded.get("/world", params={"time": -3.0}).json()["objects"] == []  # before all
 
 
 def test_class_filter_is_taxonomy_aware(seeded: TestClient) -> None:

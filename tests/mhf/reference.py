@@ -30,14 +30,20 @@ L_class * N(z; x-, P- + R)`` (times ``label_error_rate`` for another label, or f
 no label while another object of the hypothesis holds the detection's; for the
 object holding the detection's label within ``label_gate``, N is 0.9 N(S) + 0.1 N(S +
 (label_gate / 3)^2 I)). Between scans every object's existence decays and every
-hypothesis is weighted by its objects' missed-detection probabilities q (rates
-f_existing times the probability of being inside the region); objects with existence
-times that probability below ``removal_existence`` are removed. Class distributions
+Between scans every object's existence decays by its leave rate (no weight); at a
+scan, the objects its source watches (the source took a detection of the object, and
+reports something within its mean span of it, or the object has had no detection
+after the time it was created) are
+missed over the time since the source's previous scan, and every hypothesis is
+weighted by their missed-detection probabilities q (rates f_existing times the
+probability of being inside the region widened by the noise's gate quantile); objects
+with existence times that probability below ``removal_existence`` are removed. Class distributions
 use L(reported | true) = 1 (reported is true or a superclass), ``confusion_rate``
 (a common ancestor), ``unrelated_confusion_rate`` (none); the class is the most
 specific one whose subtree holds more than half.
 
-Then Bayes (eq. 1): children normalised over all parents; pruned by ratio alpha
+Detections clearly outside the region (beyond an edge by more than their noise at the
+gate's one-dimensional quantile) are ignored. Then Bayes (eq. 1): children normalised over all parents; pruned by ratio alpha
 (eq. 3) after each detection. Objects whose largest position variance exceeds
 P_max, or unseen longer than the class's maximum, are removed at each scan's time
 (before its detections); hypotheses that became identical are merged.
@@ -50,6 +56,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.special import chdtri
 
 from semwm.knowledge.model import Knowledge
 
@@ -76,6 +83,7 @@ class RefObject:
     last_seen: float
     r: float = 1.0
     probs: tuple[tuple[str, float], ...] = ()
+    sources: frozenset[str] = frozenset()  # the sources of the detections it took
 
     @property
     def identity(self) -> tuple[int, tuple[int, ...], str | None]:
@@ -102,6 +110,12 @@ class ReferenceMHF:
         self.time: float | None = None
         region = knowledge.world.region
         self.volume = math.prod(hi - lo for lo, hi in region) if region else 1.0
+        # each source's clock (semwm.mhf.rates.SourceClock): last scan, mean interval
+        # between its scans, mean span of its scans' detections
+        self.created: dict[int, float] = {}  # lineage (its first detection) -> time
+        self.last_scan: dict[str, float] = {}
+        self.intervals: dict[str, float] = {}
+        self.spans: dict[str, float] = {}
 
     # -------------------------------------------------------------- knowledge
     def ancestors(self, cls: str) -> set[str]:
@@ -159,6 +173,13 @@ class ReferenceMHF:
             return max(names, key=lambda n: (probs.get(n, 0.0), -names.index(n)))
         return max(candidates, key=lambda n: (depth[n], mass[n], -names.index(n)))
 
+    def margin(self, o: RefObject, axis: int) -> float:
+        """How far outside the region an object still counts as on its edge: its class's
+        noise at the gate's one-dimensional quantile (0 with the gate off)."""
+        p = self.k.world.gate_probability
+        gamma = float(chdtri(1, 1.0 - p)) if p < 1.0 else 0.0
+        return math.sqrt(gamma * self.R(o.cls)[axis, axis])
+
     def inside(self, o: RefObject) -> float:
         region = self.k.world.region
         if region is None:
@@ -166,18 +187,58 @@ class ReferenceMHF:
         p = 1.0
         for axis, (lo, hi) in enumerate(region):
             sd = math.sqrt(o.P[axis, axis])
+            m = self.margin(o, axis)
             cdf = lambda v: 0.5 * (1.0 + math.erf(v / math.sqrt(2.0)))  # noqa: E731
-            p *= cdf((hi - o.x[axis]) / sd) - cdf((lo - o.x[axis]) / sd)
+            p *= cdf((hi + m - o.x[axis]) / sd) - cdf((lo - m - o.x[axis]) / sd)
         return p
 
-    def decay(self, o: RefObject, dt: float) -> tuple[RefObject, float]:
-        """Existence after dt with no detection, and q = P(no detection)."""
+    def leave(self, o: RefObject, dt: float) -> RefObject:
+        """Existence after dt: it may have left (rate mu); no evidence, no weight."""
         mu = self.k.classes[o.cls].leave_frequency
+        return replace(o, r=o.r * math.exp(-mu * dt))
+
+    def watched(self, o: RefObject, scan: Sequence[RefDetection]) -> bool:
+        """The scan's source detected the object before, and reports something near it
+        (within its mean span, at least the object's margin), or it is unconfirmed."""
+        source = scan[0].source or ""
+        if source not in o.sources:
+            return False
+        if o.last_seen <= self.created[o.lineage]:  # no detection since its first
+            return True
+        radius = max(self.spans.get(source, 0.0), *(self.margin(o, a) for a in range(len(o.x))))
+        return any(float(np.linalg.norm(z.z - o.x)) <= radius for z in scan)
+
+    def miss(self, o: RefObject, span: float) -> tuple[RefObject, float]:
+        """Existence after the scan's source looked for span seconds where the object is
+        and did not report it, and q = P(no detection)."""
         f = self.f_existing(o.cls) * self.inside(o)
-        stay = math.exp(-(mu + f) * dt)
-        left = mu / (mu + f) * (1.0 - stay) if mu + f > 0 else 0.0
-        q = (1.0 - o.r) + o.r * (stay + left)
+        stay = math.exp(-f * span)
+        q = (1.0 - o.r) + o.r * stay
         return replace(o, r=o.r * stay / q), q
+
+    def miss_span(self, source: str, t: float) -> float:
+        """The time since the source's previous scan, at most twice its mean interval."""
+        last = self.last_scan.get(source)
+        if last is None or t <= last:
+            return 0.0
+        interval = self.intervals.get(source)
+        return t - last if interval is None else min(t - last, 2.0 * interval)
+
+    def after_scan(self, scan: Sequence[RefDetection]) -> None:
+        """The source's clock: last scan, mean interval, mean span of its detections."""
+        source, t = scan[0].source or "", scan[0].time
+        last = self.last_scan.get(source)
+        if last is not None and t > last:
+            old = self.intervals.get(source)
+            self.intervals[source] = t - last if old is None else 0.9 * old + 0.1 * (t - last)
+        if last is None or t > last:
+            self.last_scan[source] = t
+        if len(scan) >= 2:
+            zs = np.array([z.z for z in scan])
+            extent = zs.max(axis=0) - zs.min(axis=0)
+            span = float(np.sqrt(extent @ extent))
+            old_span = self.spans.get(source, 0.0)
+            self.spans[source] = span if old_span <= 0.0 else old_span + 0.1 * (span - old_span)
 
     @staticmethod
     def density(y: np.ndarray, S: np.ndarray) -> float:
@@ -229,16 +290,40 @@ class ReferenceMHF:
         ]
 
     # -------------------------------------------------------------- the filter
+    def outside(self, z: RefDetection) -> bool:
+        """Clearly outside the region: beyond an edge by more than its noise's margin (such
+        a detection is ignored, semwm.validation.outside_region)."""
+        region = self.k.world.region
+        if region is None:
+            return False
+        p = self.k.world.gate_probability
+        gamma = float(chdtri(1, 1.0 - p)) if p < 1.0 else 0.0
+        R = self.R(z.cls)
+        return any(
+            not lo - math.sqrt(gamma * R[a, a]) <= z.z[a] <= hi + math.sqrt(gamma * R[a, a])
+            for a, (lo, hi) in enumerate(region)
+        )
+
     def process_scan(self, scan: Sequence[RefDetection]) -> None:
+        scan = [z for z in scan if not self.outside(z)]
+        if not scan:
+            return
         t = scan[0].time
+        self.created.update((z.seq, z.time) for z in scan)
         merged: dict[frozenset, RefHypothesis] = {}
         for h in self.hypotheses:
             objects = [self.predict(o, t) for o in h.objects]
             p = h.p
             if self.model == "mht" and self.time is not None and t > self.time:
-                decayed = [self.decay(o, t - self.time) for o in objects]
-                objects = [o for o, _ in decayed]
-                p *= math.prod(q for _, q in decayed)
+                objects = [self.leave(o, t - self.time) for o in objects]
+            if self.model == "mht" and self.time is not None:
+                span = self.miss_span(scan[0].source or "", t)
+                if span > 0.0:
+                    missed = [
+                        self.miss(o, span) if self.watched(o, scan) else (o, 1.0) for o in objects
+                    ]
+                    objects = [o for o, _ in missed]
+                    p *= math.prod(q for _, q in missed)
             objects = [o for o in objects if not self.leaving(o, t)]
             if self.model == "mht":
                 floor = self.k.world.removal_existence
@@ -289,6 +374,7 @@ class ReferenceMHF:
                         t,
                         r=w_new / (w_clutter + w_new),
                         probs=tuple(sorted(probs.items())),
+                        sources=frozenset({z.source or ""}),
                     )
                     if w_new > 0:
                         kids = self.relabel([*objs, new], len(objs), z.label)
@@ -308,6 +394,7 @@ class ReferenceMHF:
                         np.array(self.k.classes[z.cls].initial_covariance, float),
                         t,
                         t,
+                        sources=frozenset({z.source or ""}),
                     )
                     kids = self.relabel([*objs, new], len(objs), z.label)
                     children.append((p * w_new, kids, taken | {z.seq}, before))
@@ -364,6 +451,7 @@ class ReferenceMHF:
                         t,
                         r=1.0,
                         probs=probs_post,
+                        sources=o.sources | {z.source or ""},
                     )
                     kids = list(objs)
                     kids[i] = updated
@@ -378,6 +466,7 @@ class ReferenceMHF:
                 children = [(c[0] / total, *c[1:]) for c in children]
             current = children
         self.hypotheses = [RefHypothesis(p, objs) for p, objs, _, _ in current]
+        self.after_scan(scan)
 
 
 def run_reference(

@@ -131,10 +131,11 @@ def test_first_detection_mht_is_one_object_of_existence_b_over_b_plus_c() -> Non
 
 
 def test_second_detection_mht() -> None:
-    """mht: the first object's existence decays over dt unseen (rate FE while inside the
+    """mht: the first object's existence decays over dt: it may leave (rate mu) and the
+    source that reported it scans again without reporting it (rate FE while inside the
     region, semwm.mhf.existence), then the second detection either updates it (weight r
     FE N(z; x, S)) or is new-or-clutter (weight (FC + FN) / V, a second object)."""
-    from scipy.special import ndtr
+    from scipy.special import chdtri, ndtr
 
     z1, z2, dt, V = np.array([1.0, 2.0]), np.array([1.2, 1.9]), 2.0, 40.0
     wm = _cup_world("mht")
@@ -143,14 +144,17 @@ def test_second_detection_mht() -> None:
     P_pred = P0 * np.eye(2) + dt * QC * np.eye(2)
     x_post, _, y, S = _kalman(z1, P_pred, z2, R_FULL)
     sd = math.sqrt(P_pred[0, 0])
-    inside = (ndtr((10 - 1.0) / sd) - ndtr((0 - 1.0) / sd)) * (
-        ndtr((4 - 2.0) / sd) - ndtr(-2.0 / sd)
+    # the region widened by the class's noise at the gate's 1-D quantile (soft region)
+    gate = wm.knowledge.world.gate_probability  # 1 here: no margin
+    m = math.sqrt(chdtri(1, 1.0 - gate) * R) if gate < 1.0 else 0.0
+    inside = (ndtr((10 + m - 1.0) / sd) - ndtr((0 - m - 1.0) / sd)) * (
+        ndtr((4 + m - 2.0) / sd) - ndtr((0 - m - 2.0) / sd)
     )
     r0, mu = FN / (FC + FN), 0.01  # mu: the default leave_frequency
-    f = FE * inside
-    stay = math.exp(-(mu + f) * dt)
-    left = mu / (mu + f) * (1 - stay)  # it may have left unseen
-    r1 = r0 * stay / (1 - r0 + r0 * (stay + left))
+    r_left = r0 * math.exp(-mu * dt)  # it may have left: no evidence, no weight
+    f = FE * inside  # the same source scans again where it reported the object: a miss
+    stay = math.exp(-f * dt)
+    r1 = r_left * stay / (1 - r_left + r_left * stay)
     dens = math.exp(-0.5 * y @ np.linalg.inv(S) @ y) / (2 * math.pi * math.sqrt(np.linalg.det(S)))
     w_same, w_new = r1 * FE * dens, (FC + FN) / V
     got = _existence(wm)

@@ -10,7 +10,7 @@ import pytest
 
 from semwm import WorldModel
 from semwm.knowledge.loader import knowledge_from_text
-from semwm.mhf.rates import WINDOW_DETECTIONS, ObservedRates
+from semwm.mhf.rates import WINDOW_DETECTIONS, ObservedRates, ScanCoverage
 
 KNOWLEDGE = """
 world: {dimension: 2, region: [[0, 4], [0, 3]], observed_detection_rates: %s}
@@ -64,10 +64,9 @@ def test_the_knowledge_rate_is_a_floor_and_a_stream_counts_only_while_it_sees_th
         50.0,
         2.0,
     ]
-    # over an interval the stream counts for the part in which it still sees the object
-    window = WINDOW_DETECTIONS / g
-    averaged = rates.over(lineages, base, last, last + 2 * window)
-    assert averaged.tolist() == pytest.approx([2.0 + (g - 2.0) / 2, 2.0])
+    # the rate at which the source misses an object is its streams' that detected it
+    missed = rates.source_rates("robot", lineages, base, ["", ""])
+    assert missed.tolist() == pytest.approx([rates.rate(("robot", "camera"), "", 2.0), 2.0])
 
 
 def test_lineages_that_are_gone_are_forgotten() -> None:
@@ -147,44 +146,40 @@ def test_a_teams_hypotheses_stay_bounded_and_its_world_is_the_four_cups() -> Non
     ]
 
 
-def test_the_class_rate_applies_only_where_some_sensor_reaches() -> None:
+def test_a_scan_with_a_sensor_position_and_a_range_watches_what_is_within_reach() -> None:
     rates = ObservedRates()
-    for k in range(5):
-        rates = rates.after_scan("a", k / 10, {"camera": [1]}, {}, {1}, (0.0, 0.0))
-        rates = rates.after_scan("b", k / 10, {"camera": [2]}, {}, {2}, (10.0, 0.0))
-    positions = np.array([[1.0, 1.0], [5.0, 0.0], [9.0, 0.0]])
-    assert rates.covered(positions, 3.0, 0.4).tolist() == [1.0, 0.0, 1.0]
-    assert rates.covered(positions, None, 0.4).tolist() == [
-        1.0,
-        1.0,
-        1.0,
-    ]  # a detector without range
-    # a source that does not say where its sensor is: coverage unknown, everywhere
-    unknown = rates.after_scan("c", 0.4, {"camera": [3]}, {}, {1, 2, 3})
-    unknown = unknown.after_scan("c", 0.5, {"camera": [3]}, {}, {1, 2, 3})
-    assert unknown.covered(positions, 3.0, 0.5).tolist() == [1.0, 1.0, 1.0]
-    # sensors that stand still keep their view while silent (they saw nothing)
-    assert rates.covered(positions, 3.0, 5.0).tolist() == [1.0, 0.0, 1.0]
-    # a source without a position that went silent for many of its intervals no
-    # longer makes every object count as seen
-    assert unknown.covered(positions, 3.0, 5.0).tolist() == [1.0, 0.0, 1.0]
+    scan = ScanCoverage("a", np.array([[0.5, 0.5]]), np.array([0.0, 0.0]), 3.0)
+    positions = np.array([[1.0, 1.0], [5.0, 0.0], [2.9, 0.0]])
+    nobody = [frozenset()] * 3  # geometry decides: whoever detected them
+    watched = rates.watched(scan, nobody, positions, np.zeros((3, 2)), [False] * 3)
+    assert watched.tolist() == [True, False, True]
 
 
-def test_a_silent_moving_sensor_covers_what_it_surely_still_sees() -> None:
-    """A sensor that moved at 1 m/s and then says nothing: its last position holds for
-    one interval (0.1 s); after it the sensor may be anywhere within 1 m/s of it, so
-    only objects within ``reach - 1 m/s x overdue`` are surely in view."""
+def test_without_a_pose_a_source_watches_only_what_it_detected_near_what_it_reports() -> None:
+    """Learnt coverage: objects it detected, within its scans' span of what this scan
+    reports, or unconfirmed; never another source's objects."""
     rates = ObservedRates()
-    for k in range(5):
-        rates = rates.after_scan("robot", k / 10, {"scanner": [1]}, {}, {1}, (k / 10, 0.0))
-    last = 0.4
-    positions = np.array([[last + 2.5, 0.0], [last + 2.9, 0.0], [last + 3.5, 0.0]])
-    assert rates.covered(positions, 3.0, last + 0.1).tolist() == [1.0, 1.0, 0.0]
-    # 0.3 s overdue: surely in view within 2.7 m only
-    assert rates.covered(positions, 3.0, last + 0.4).tolist() == [1.0, 0.0, 0.0]
-    # over an interval: the part of it in which each was surely in view
-    fraction = rates.covered(positions, 3.0, last, last + 1.0)
-    assert fraction == pytest.approx([0.6, 0.2, 0.0])
+    for k in range(5):  # source a reports two things 1 m apart: span 1 m
+        rates = rates.after_scan("a", k / 10, {"camera": [1, 2]}, {}, {1, 2}, span=1.0)
+    assert rates.sources["a"].span == pytest.approx(1.0)
+    scan = ScanCoverage("a", np.array([[0.0, 0.0]]))
+    positions = np.array([[0.8, 0.0], [3.0, 0.0], [0.5, 0.0], [6.0, 0.0]])
+    sources = [frozenset({"a"}), frozenset({"a"}), frozenset({"b"}), frozenset({"a"})]
+    unconfirmed = [False, False, False, True]
+    watched = rates.watched(scan, sources, positions, np.full((4, 2), 0.1), unconfirmed)
+    # near and its own; far; near but another source's; far but its unconfirmed one
+    assert watched.tolist() == [True, False, False, True]
+
+
+def test_a_scan_counts_as_looking_for_at_most_two_intervals_and_silence_for_none() -> None:
+    rates = ObservedRates()
+    assert rates.miss_span("a", 1.0) == 0.0  # its first scan
+    rates = rates.after_scan("a", 0.0, {}, {}, set())
+    assert rates.miss_span("a", 0.3) == pytest.approx(0.3)  # sets the interval
+    for k in range(1, 30):
+        rates = rates.after_scan("a", k / 10, {}, {}, set())
+    assert rates.miss_span("a", 2.9 + 0.1) == pytest.approx(0.1)
+    assert rates.miss_span("a", 2.9 + 5.0) == pytest.approx(0.2, rel=1e-3)  # not 5 s
 
 
 def test_a_stream_counts_each_class_at_its_own_rate_from_the_knowledges_prior() -> None:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from semwm import WorldModel, load_knowledge
+from semwm import BeforeHistoryError, WorldModel, load_knowledge
 from semwm.knowledge import KnowledgeError
 from semwm.knowledge.loader import analyse_file
 
@@ -147,13 +147,25 @@ def test_a_superclass_report_keeps_the_specific_class(tmp_path: Path) -> None:
 
 def test_an_object_that_goes_unseen_is_removed(tmp_path: Path) -> None:
     """Case 5: a lone track with no competitor used to stay forever. A cup seen for 2 s
-    and then never again, while in the camera's view, leaves the world."""
+    and then never again, while the camera keeps reporting the can beside it (so it
+    still looks there), leaves the world."""
+    wm = _world(tmp_path)
+    for d in _cup_stream(np.random.default_rng(2), 2.0):
+        wm.ingest([d, {**d, "class": "Can", "position": [1.4, 1.2]}])
+    assert len(wm.world().objects) == 2
+    for k in range(20):
+        wm.ingest({"time": 2.0 + 0.2 * k, "class": "Can", "position": [1.4, 1.2]})
+    assert not wm.world(near=(1.0, 1.0, 0.2)).objects
+
+
+def test_an_object_the_camera_stops_looking_at_stays(tmp_path: Path) -> None:
+    """Silence, and scans elsewhere, are never misses (issue 28): the same cup, and the
+    camera reports nothing for 8 s and then something 3 m away: the cup stays."""
     wm = _world(tmp_path)
     for d in _cup_stream(np.random.default_rng(2), 2.0):
         wm.ingest(d)
-    assert len(wm.world().objects) == 1
     wm.ingest({"time": 10.0, "class": "Cup", "position": [2.5, -2.0]})  # elsewhere
-    assert not wm.world(near=(1.0, 1.0, 0.5)).objects
+    assert wm.world(near=(1.0, 1.0, 0.5)).objects
 
 
 def test_a_ball_predicted_far_outside_the_region_is_not_listed() -> None:
@@ -198,8 +210,10 @@ def test_a_query_before_an_object_was_born_does_not_show_it(tmp_path: Path) -> N
     for d in _cup_stream(np.random.default_rng(3), 3.0):
         wm.ingest({**d, "time": d["time"] + 2.0})
     assert wm.world(time=-5.0).objects == ()
-    assert wm.world(time=1.9).objects == ()
-    assert len(wm.world(time=4.0).objects) == 1
+    assert wm.world(time=1.9).objects == ()  # before the first detection: nothing
+    assert len(wm.world().objects) == 1
+    with pytest.raises(BeforeHistoryError):  # no history kept: not the current world
+        wm.world(time=4.0)
 
 
 def test_a_labelled_self_report_outside_the_gate_updates_its_object() -> None:

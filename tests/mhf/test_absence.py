@@ -1,0 +1,226 @@
+"""What semwm concludes from not seeing something (issue 28; docs/knowledge.md, "What
+semwm concludes from not seeing something"): each measured case of the issue, checked
+to fail on the model before it."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from semwm import BeforeHistoryError, WorldModel, load_knowledge
+from semwm.knowledge.loader import knowledge_from_text
+
+SIM1 = Path(__file__).parents[2] / "knowledge" / "sim1.yaml"
+ROBOCUP = Path(__file__).parents[2] / "knowledge" / "robocup.yaml"
+
+
+def _cup(wm: WorldModel, **query: Any) -> list[Any]:
+    return [o for o in wm.world(min_existence=1e-9, **query).objects if o.cls == "Cup"]
+
+
+def test_another_sources_scans_never_miss_an_object_it_never_saw() -> None:
+    """Source A reports a Cup ten times and goes silent; B reports a Table elsewhere every
+    0.2 s for a minute, with no sensor pose. B never looked at the Cup: the Cup's
+    existence only follows the class's leave rate (it was 0.017 at 6 s)."""
+    wm = WorldModel(load_knowledge(SIM1))
+    for i in range(10):
+        wm.ingest([{"time": 0.2 * i, "class": "Cup", "position": [1.0, 1.0], "source": "A"}])
+    at_2 = _cup(wm)[0].existence
+    t = 1.8
+    while t < 62.0:
+        t = round(t + 0.2, 6)
+        wm.ingest([{"time": t, "class": "Table", "position": [3.0, 0.5], "source": "B"}])
+    (cup,) = _cup(wm)
+    assert cup.existence > 0.5
+    leave = wm.knowledge.classes["Cup"].leave_frequency
+    assert cup.existence == pytest.approx(at_2 * math.exp(-leave * (t - 1.8)), rel=1e-6)
+
+
+def test_a_source_that_keeps_looking_there_removes_what_is_gone() -> None:
+    """A camera (no pose) reports a Cup and a Table beside it; the Cup is taken away and
+    the camera goes on reporting the Table: its scans are misses for the Cup (it keeps
+    reporting things within its view's span of it), and the Cup leaves the world."""
+    wm = WorldModel(load_knowledge(SIM1))
+    t = 0.0
+    for _ in range(20):
+        wm.ingest(
+            [
+                {"time": t, "class": "Cup", "position": [1.0, 1.0], "source": "cam"},
+                {"time": t, "class": "Table", "position": [2.0, 1.2], "source": "cam"},
+            ]
+        )
+        t = round(t + 0.2, 6)
+    assert _cup(wm)[0].existence > 0.9
+    removed_at = t
+    while t < removed_at + 5.0:
+        wm.ingest([{"time": t, "class": "Table", "position": [2.0, 1.2], "source": "cam"}])
+        t = round(t + 0.2, 6)
+    cups = _cup(wm)
+    assert not cups or cups[0].existence < 0.05
+    assert not [o for o in wm.world().objects if o.cls == "Cup"]
+
+
+def test_a_lone_false_alarm_is_denied_by_the_sensor_that_made_it() -> None:
+    """A camera reports a Cup once and never again while it goes on scanning (the Table
+    far away): the unconfirmed Cup is missed by its own source and does not stay."""
+    wm = WorldModel(load_knowledge(SIM1))
+    wm.ingest([{"time": 0.0, "class": "Table", "position": [3.0, 0.5], "source": "cam"}])
+    wm.ingest(
+        [
+            {"time": 0.2, "class": "Table", "position": [3.0, 0.5], "source": "cam"},
+            {"time": 0.2, "class": "Cup", "position": [0.5, 2.5], "source": "cam"},
+        ]
+    )
+    t = 0.2
+    while t < 6.0:
+        t = round(t + 0.2, 6)
+        wm.ingest([{"time": t, "class": "Table", "position": [3.0, 0.5], "source": "cam"}])
+    cups = _cup(wm)
+    assert not cups or cups[0].existence < 0.02
+
+
+FORKLIFT = """
+world:
+  dimension: 2
+  region: [[0, 60], [0, 20]]
+classes:
+  - name: Forklift
+    detection_frequency: 10.0
+    new_frequency: 0.01
+    filter:
+      type: kalman
+      model:
+        motion_model: first_order
+        system_noise: [[1.0, 0.0], [0.0, 1.0]]
+    measurement_noise: [[0.04, 0.0], [0.0, 0.04]]
+    initial_velocity_covariance: [[4.0, 0.0], [0.0, 4.0]]
+detectors:
+  - name: lidar
+    clutter_frequency: 0.5
+"""
+
+
+def _forklift(reorder_window: float) -> tuple[WorldModel, float]:
+    """A forklift driving at 2 m/s along y = 10, seen at 10 Hz for 10 s."""
+    wm = WorldModel(knowledge_from_text(FORKLIFT, "yaml"), reorder_window=reorder_window)
+    t = 0.0
+    for k in range(101):
+        t = k / 10
+        wm.ingest([{"time": t, "class": "Forklift", "position": [5.0 + 2.0 * t, 10.0]}])
+    return wm, t
+
+
+def test_a_query_about_the_future_applies_no_misses() -> None:
+    """Seen until T: at T + 1 and T + 2 no scan has happened, so the forklift is only
+    predicted and may only have left at its leave rate (it had 0.10 and nothing)."""
+    wm, T = _forklift(0.0)
+    (now,) = wm.world().objects
+    for dt in (1.0, 2.0):
+        (later,) = wm.world(time=T + dt).objects
+        leave = wm.knowledge.classes["Forklift"].leave_frequency
+        assert later.existence == pytest.approx(now.existence * math.exp(-leave * dt), rel=1e-3)
+        assert later.existence > 0.5
+        assert later.position[0] == pytest.approx(5.0 + 2.0 * (T + dt), abs=0.3)
+
+
+def test_a_query_about_the_past_answers_from_the_history_or_refuses() -> None:
+    """T - 5 is the world as it was then (x about 5 + 2 (T - 5)), not the current one
+    labelled with a past time; before the history, a clear error."""
+    wm, T = _forklift(reorder_window=8.0)
+    (past,) = wm.world(time=T - 5.0).objects
+    assert past.position[0] == pytest.approx(5.0 + 2.0 * (T - 5.0), abs=0.3)
+    assert wm.world(time=T - 5.0).time == T - 5.0
+    with pytest.raises(BeforeHistoryError, match="reorder-window"):
+        wm.world(time=T - 9.5)
+    without_history, T = _forklift(reorder_window=0.0)
+    with pytest.raises(BeforeHistoryError):
+        without_history.world(time=T - 5.0)
+    assert without_history.world(time=T).objects  # now is always known
+
+
+def test_an_unseen_ball_ages_by_confidence_before_it_is_removed() -> None:
+    """Paper 004: a Ball seen 5 times by r1 and then by nobody keeps its estimate and goes
+    valid -> suspicious -> invalid while it is still listed, and only then is removed
+    (it was valid until it was gone at 2 s)."""
+    wm = WorldModel(load_knowledge(ROBOCUP))
+    for i in range(5):
+        wm.ingest(
+            [{"time": 0.1 * i + 0.1, "class": "Ball", "position": [1.0, 2.0], "source": "r1"}]
+        )
+    states = []
+    for k in range(1, 61):
+        t = 0.5 + 0.05 * k
+        objects = [o for o in wm.world(time=t).objects if o.cls == "Ball"]
+        if not objects:
+            break
+        assert objects[0].position == pytest.approx((1.0, 2.0), abs=0.2)
+        assert objects[0].confidence is not None
+        states.append(objects[0].confidence.state)
+    assert states[0] == "valid"
+    seen = [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s]
+    assert seen == ["valid", "suspicious", "invalid"]
+
+
+def test_detections_outside_the_region_are_ignored_with_a_reason() -> None:
+    """Five Cups at (25, 20) with region [[0, 4], [0, 3]] (a unit or frame mistake):
+    each is reported as ignored, with its index and reason, and nothing changes."""
+    wm = WorldModel(load_knowledge(SIM1))
+    result = wm.ingest(
+        [
+            {"time": 0.0, "class": "Cup", "position": [1.0, 1.0]},
+            *({"time": 0.0, "class": "Cup", "position": [25.0, 20.0]} for _ in range(5)),
+        ]
+    )
+    assert result.applied == 1
+    assert result.ignored == 5
+    assert [i.index for i in result.ignored_detections] == [1, 2, 3, 4, 5]
+    assert {i.reason for i in result.ignored_detections} == {"outside_region"}
+    assert "check units and frame" in result.ignored_detections[0].message
+    objects = wm.world(min_existence=1e-9).objects
+    assert all(o.position[0] < 5.0 for o in objects)
+
+
+def test_a_detection_on_the_regions_edge_is_used() -> None:
+    """Within the noise of the edge (2 cm outside x = 4 with sigma 0.1 m) is the edge."""
+    wm = WorldModel(load_knowledge(SIM1))
+    result = wm.ingest([{"time": 0.0, "class": "Cup", "position": [4.02, 1.0]}])
+    assert result.applied == 1 and result.ignored == 0
+
+
+TABLE_TOP = """
+world:
+  dimension: 3
+  region: [[0, 6], [0, 4], [%(floor)s, 2.0]]
+classes:
+  - name: Table
+    detection_frequency: 2.0
+    new_frequency: 0.01
+    filter:
+      type: kalman
+      model:
+        motion_model: zeroth_order
+        system_noise: [[1.0e-6, 0, 0], [0, 1.0e-6, 0], [0, 0, 1.0e-6]]
+    measurement_noise: [[0.0025, 0, 0], [0, 0.0025, 0], [0, 0, 0.0025]]
+detectors:
+  - name: camera
+    clutter_frequency: 0.5
+"""
+
+
+@pytest.mark.parametrize("offset_sigmas", [-3.0, -1.0, 0.0, 1.0, 3.0])
+def test_an_object_on_the_regions_edge_is_published(offset_sigmas: float) -> None:
+    """A table top at z = 0.74 with the region's floor anywhere within 3 sigma of it
+    (sigma = 5 cm): published from its third detection (it was never published with
+    the floor at 0.74: existence 0.45 at 3 s, then 0.02-0.05)."""
+    floor = 0.74 + offset_sigmas * 0.05
+    wm = WorldModel(knowledge_from_text(TABLE_TOP % {"floor": floor}, "yaml"))
+    noise = [0.03, -0.04, 0.05, -0.02, 0.01, -0.05, 0.04, 0.0] * 4
+    published = []
+    for k, dz in enumerate(noise):
+        t = 0.5 * k
+        wm.ingest([{"time": t, "class": "Table", "position": [3.0, 2.0, 0.74 + dz]}])
+        published.append(bool([o for o in wm.world().objects if o.cls == "Table"]))
+    assert all(published[2:]), published
