@@ -15,6 +15,8 @@ The checks, for the ``mht`` model (:mod:`semwm.mhf.existence`,
   existing object (``f_e N(z; Hx, S)`` at the centre of the gate) must beat the
   clutter and birth densities by more than the existence lost between two
   detections (a factor ``e``), or existence never grows;
+* a class whose unseen objects are removed (C3 or P_max) before their confidence can
+  turn invalid (paper 004): a robot never learns that it should go and look;
 * the literal ``paper`` model, which keeps an empty world with most rates.
 """
 
@@ -24,8 +26,9 @@ import math
 
 import numpy as np
 
+from semwm.filters.factory import build_class_filter
 from semwm.knowledge.coverage import birth_volume, coverage_volume
-from semwm.knowledge.model import Knowledge
+from semwm.knowledge.model import Knowledge, ResolvedClass
 from semwm.knowledge.problems import Problem
 
 CONFIRMATION_LIMIT = 20
@@ -74,6 +77,19 @@ def advice(knowledge: Knowledge) -> list[Problem]:
                 )
             )
             continue
+        early = _removed_before_invalid(spec, world.dimension)
+        if early is not None:
+            when, why, field = early
+            warnings.append(
+                _warning(
+                    f"an unseen {name!r} is removed by {why} about {when:.2g} s after its "
+                    f"last detection, before its confidence turns invalid "
+                    f"({_time_to_invalid(spec):.2g} s at confidence_decay "
+                    f"{spec.confidence_decay:g}): a robot never learns to go and look; raise "
+                    f"{field}, or confidence_decay",
+                    (*path, field),
+                )
+            )
         forgets = (
             (spec.detection_frequency > 0.0 and world.missed_detection_term)
             or spec.leave_frequency > 0.0
@@ -163,3 +179,43 @@ def advice(knowledge: Knowledge) -> list[Problem]:
                     )
                 )
     return warnings
+
+
+SETTLING_DETECTIONS = 5
+"""Detections an object has had when it goes out of view, for the P_max check."""
+
+
+def _time_to_invalid(spec: ResolvedClass) -> float:
+    """s unseen until the confidence turns invalid (paper 004: exp(-lambda t) below
+    ``invalid_confidence``); infinite when it does not decay with time."""
+    if spec.confidence_decay <= 0.0 or spec.invalid_confidence <= 0.0:
+        return math.inf
+    return math.log(1.0 / spec.invalid_confidence) / spec.confidence_decay
+
+
+def _removed_before_invalid(spec: ResolvedClass, dim: int) -> tuple[float, str, str] | None:
+    """When (s after its last detection) C3 or P_max removes an unseen object of the class
+    before it can become invalid, by what, and the field: ``None`` if neither does. P_max
+    is judged on an object seen :data:`SETTLING_DETECTIONS` times at the class's rate."""
+    invalid = _time_to_invalid(spec)
+    if not math.isfinite(invalid):
+        return None
+    c3 = spec.max_time_without_update
+    p_max = spec.max_position_variance
+    if p_max is not None:
+        flt = build_class_filter(spec, dim)
+        x, P, mu = flt.initial_states(np.zeros((1, dim)))
+        R = np.asarray(spec.measurement_noise, dtype=float)[None]
+        step = 1.0 / spec.detection_frequency if spec.detection_frequency > 0 else 0.1
+        for _ in range(SETTLING_DETECTIONS - 1):
+            x, P, mu = flt.predict(x, P, mu, np.array([step]))
+            x, P, mu, _ = flt.update(x, P, mu, np.zeros((1, dim)), R)
+        for t in np.linspace(0.0, invalid, 65)[1:]:
+            _, Pt = flt.combine(*flt.predict(x, P, mu, np.array([t])))
+            if float(np.linalg.eigvalsh(Pt[0, :dim, :dim]).max()) > p_max:
+                if c3 is None or t < c3:
+                    return float(t), "P_max", "max_position_variance"
+                break
+    if c3 is not None and c3 < invalid:
+        return c3, "C3", "max_time_without_update"
+    return None

@@ -76,3 +76,27 @@ def test_validate_prints_warnings_and_exits_0(
     out = capsys.readouterr().out
     assert f"{path}:7: warning: no object of class 'Cup' can ever appear" in out
     assert f"{path}: OK" in out
+
+
+def test_removed_unseen_before_its_confidence_turns_invalid_is_warned() -> None:
+    """Issue 28: C3 at 1 s with the default decay (0.1/s: invalid after 14 s) removes an
+    unseen cup long before a robot could learn that it should go and look."""
+    (warning,) = _warnings(cls="\n    max_time_without_update: 1.0")
+    assert "removed by C3 about 1 s" in warning and warning.startswith("mine.yaml:")
+    assert _warnings(cls="\n    max_time_without_update: 1.0\n    confidence_decay: 2.0") == []
+
+
+def test_p_max_reached_before_invalid_is_warned() -> None:
+    """A walking person's covariance passes P_max within seconds of its last detection."""
+    person = (
+        "\n    max_position_variance: 0.01"
+        "\n    initial_velocity_covariance: [[1.0, 0], [0, 1.0]]"
+    )
+    text = BASE.format(world="", f=5.0, new=0.05, cls=person, r=0.0025, c=1.0).replace(
+        "motion_model: zeroth_order, system_noise: [[1.0e-6, 0], [0, 1.0e-6]]",
+        "motion_model: first_order, system_noise: [[1.0, 0], [0, 1.0]]",
+    )
+    analysis = analyse_text(text, "yaml", "mine.yaml")
+    assert analysis.knowledge is not None, analysis.problems
+    (warning,) = [str(w) for w in analysis.warnings]
+    assert "removed by P_max" in warning and "max_position_variance" in warning
