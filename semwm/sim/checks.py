@@ -292,6 +292,7 @@ SCENARIO_CHECKS: dict[str, Callable[[RunResult], list[CheckResult]]] = {
     "datasheet": _datasheet,
     "patrol": _patrol,
     "leftbehind": _leftbehind,
+    "region_edge": _sim1_like,
 }
 """Issue 9's acceptance checks per scenario name (sim1, sim2, robocup as the issue
 states them; each variant gets the checks of the scenario it hardens)."""

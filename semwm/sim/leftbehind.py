@@ -27,6 +27,7 @@ carry their sensor view (``SensorReport``: position and heading), the empty ones
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, cast
@@ -58,7 +59,8 @@ class ViewCheck:
     ``objects_asked``/``objects_failed``: objects the check applies to / that fail it;
     ``frames_asked``/``frames_failed``: truth frames summed over the objects (for (b):
     frames after the deadline); ``worst``: the worst failing case (``object``,
-    ``time`` it first failed, ``detail``; for (b) also ``latency_s``), else ``None``.
+    ``time`` it first failed, ``detail``; for (b) also ``latency_s``, ``None`` when still
+    published at the end), else ``None``.
     """
 
     name: str
@@ -241,7 +243,7 @@ def removed_leaves(
     """(b): every object removed while in the robot's view (``in_view=False``: out of
     it) is not published at any truth time from ``within`` s after its next missed
     view to the end of the run. Its latency: the last time it was published minus the
-    next missed view (``inf``: still published at the end)."""
+    next missed view (``None`` and ``still_published``: still published at the end)."""
     step = _step(scenario)
     name = (
         f"(b) removed in view leaves within {within:g} s"
@@ -273,12 +275,13 @@ def removed_leaves(
         frames_failed += count
         if count:
             still = last_seen is not None and last_seen >= end - _EPS
-            latency = float("inf") if still else float(last_seen or 0.0) - missed
+            latency = None if still else round(float(last_seen or 0.0) - missed, 3)
             failing.append(
                 {
                     "object": oid,
                     "time": round(missed + within, 3),
                     "latency_s": latency,
+                    "still_published": still,
                     "removed": removed,
                     "next_missed_view": missed,
                     "detail": (
@@ -287,7 +290,11 @@ def removed_leaves(
                     ),
                 }
             )
-    worst = max(failing, key=lambda f: f["latency_s"]) if failing else None
+    worst = (
+        max(failing, key=lambda f: math.inf if f["latency_s"] is None else f["latency_s"])
+        if failing
+        else None
+    )
     return ViewCheck(name, objects_asked, len(failing), frames_asked, frames_failed, worst)
 
 

@@ -24,6 +24,8 @@ Harder variants for the world-quality benchmark (issue 9, ``benchmarks/bench_qua
 * :func:`leftbehind`: a robot patrolling a room leaves objects on shelves and tables
   behind (out of view about 60 s, then seen again); some are picked up in view, some
   out of view; a fixed second camera elsewhere (issue 28).
+* :func:`region_edge`: 3-D objects on the region's edge: a table top on its floor,
+  books against its side wall, a sign on its back wall (issue 28).
 """
 
 from __future__ import annotations
@@ -1644,6 +1646,7 @@ def leftbehind(
             "scan_step": step,
             "sensor_range": sensor_range,
             "field_of_view": field_of_view,
+            "coverage_area": float(np.pi * sensor_range**2 * field_of_view / 360.0),
             "cam2_pose": list(LEFTBEHIND_CAM2_POSE),
             "cam2_range": cam2_range,
             "cam2_field_of_view": cam2_field_of_view,
@@ -1653,6 +1656,107 @@ def leftbehind(
                 for t, (x, y, h) in zip(times, robot, strict=True)
             ],
             "objects": objects,
+        },
+    )
+
+
+# --------------------------------------------------------------------------- region_edge
+
+EDGE_ROOM: Region = ((0.0, 4.0), (0.0, 3.0), (0.0, 2.5))
+"""The room of :func:`region_edge` (m, 3-D): a side wall at x = 4, a back wall at y = 3."""
+EDGE_TABLE_TOP = 0.74
+"""Height of the table top (m): where ``benchmarks/knowledge/region_edge.yaml``'s region
+starts (the area the robot works in: above the table)."""
+EDGE_CLASSES = ("Table", "Cup", "Book", "Sign")
+
+
+def region_edge(
+    rng: np.random.Generator,
+    *,
+    duration: float = 20.0,
+    rate: float = 5.0,
+    recall: float = 0.8,
+    table_recall: float = 0.4,
+    clutter_rate: float = 0.5,
+    noise: float = 0.05,
+    table_noise: float = 0.1,
+    n_cups: tuple[int, int] = (2, 3),
+    n_books: tuple[int, int] = (2, 3),
+    seed: int | None = None,
+) -> Scenario:
+    """Objects on the region's edge (issue 28: the region is a soft fact), in 3-D.
+
+    A fixed camera (``camera``) watches a room corner (:data:`EDGE_ROOM`) whose working
+    region (``benchmarks/knowledge/region_edge.yaml``) starts at the table top's height
+    :data:`EDGE_TABLE_TOP` and ends at the side wall x = 4 and the back wall y = 3. Its
+    edge passes through the objects: the Table is reported at the centre of its top
+    (z = 0.74, on the region's floor), ``n_cups`` Cups stand on it (centres 5 cm above
+    it: one sigma of the noise), ``n_books`` Books stand on shelves against the side
+    wall (centres 0-8 cm from it), and a Sign hangs on the back wall (centre on it).
+
+    The camera scans at ``rate`` Hz and reports each object with ``recall``
+    (the Table with ``table_recall``), isotropic noise ``noise`` (``table_noise``) m;
+    clutter: Poisson, ``clutter_rate`` per second, uniform over the room (below the
+    table top too: the knowledge's region leaves it out) and the classes.
+    """
+    (_, x1), (y0, y1), _ = EDGE_ROOM
+    table = np.array([rng.uniform(1.2, 2.3), rng.uniform(0.9, 1.6), EDGE_TABLE_TOP])
+    objects: list[tuple[str, str, np.ndarray]] = [("table", "Table", table)]
+    cups = _separated_points(
+        rng, ((-0.5, 0.5), (-0.35, 0.35)), int(rng.integers(n_cups[0], n_cups[1] + 1)), 0.25, 0.0
+    )
+    for i, (dx, dy) in enumerate(cups):
+        objects.append((f"cup{i + 1}", "Cup", table + np.array([dx, dy, 0.05])))
+    n = int(rng.integers(n_books[0], n_books[1] + 1))
+    along = _separated_points(rng, ((y0 + 0.4, y1 - 0.4),), n, 0.5, 0.0)
+    for i, (y,) in enumerate(along):
+        shelf = (0.45, 1.05, 1.65)[int(rng.integers(3))]
+        objects.append(
+            (f"book{i + 1}", "Book", np.array([x1 - rng.uniform(0.0, 0.08), y, shelf + 0.12]))
+        )
+    objects.append(("sign", "Sign", np.array([rng.uniform(1.0, 3.0), y1, rng.uniform(1.5, 2.0)])))
+    times = _frame_times(rate, duration)
+    truth_objects = tuple(TruthObject(i, c, _pos(p), (0.0, 0.0, 0.0)) for i, c, p in objects)
+    truth = [TruthFrame(float(t), truth_objects) for t in times]
+    detections: list[Detection] = []
+    for t in times:
+        t = float(t)
+        for _, cls, place in objects:
+            is_table = cls == "Table"
+            if rng.random() >= (table_recall if is_table else recall):
+                continue
+            sigma = table_noise if is_table else noise
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=cls,
+                    position=_pos(place + rng.normal(0.0, sigma, 3)),
+                    source="camera",
+                    detector="camera",
+                )
+            )
+        for xyz in _uniform(rng, EDGE_ROOM, rng.poisson(clutter_rate / rate)):
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=EDGE_CLASSES[int(rng.integers(len(EDGE_CLASSES)))],
+                    position=_pos(xyz),
+                    source="camera",
+                    detector="camera",
+                )
+            )
+    return Scenario(
+        name="region_edge",
+        truth=truth,
+        detections=detections,
+        knowledge_file="region_edge.yaml",
+        duration=float(times[-1]),
+        region=EDGE_ROOM,
+        seed=seed,
+        metadata={
+            "gospa_c": 0.5,
+            "knowledge_dir": "benchmarks/knowledge",
+            "on_edge": {i: c for i, c, _ in objects},
         },
     )
 
@@ -1668,6 +1772,7 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "datasheet": datasheet,
     "patrol": patrol,
     "leftbehind": leftbehind,
+    "region_edge": region_edge,
 }
 """Generators by name, as ``semwm simulate NAME`` knows them."""
 
