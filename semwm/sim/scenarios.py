@@ -1410,7 +1410,8 @@ def leftbehind(
     stand on shelves and tables along the walls, at least 1 m apart, each placed so
     that the robot's camera sees it at least twice in the run. ``n_removed_in_view``
     of them are picked up while in the robot's view (at 1-2.5 s into a view interval
-    of at least 5 s, not the object's first), ``n_removed_out_of_view`` while out of
+    of at least 5 s, not the object's first; else 1 s into to 2 s before the end of
+    one of at least 3 s), ``n_removed_out_of_view`` while out of
     it (in the middle of a gap between two view intervals); ``n_put_down[0]`` to
     ``n_put_down[1]`` new objects are put down while out of view (and seen later).
 
@@ -1483,16 +1484,20 @@ def leftbehind(
         )
     order = [int(k) for k in rng.permutation(n_total)]
     chosen_in: list[int] = []
-    for k in order:
-        if len(chosen_in) == n_removed_in_view:
-            break
-        runs = [r for r in _intervals(times, flags[k])[1:] if r[1] - r[0] >= 5.0]
-        if not runs:
-            continue
-        start = runs[int(rng.integers(len(runs)))][0]
-        removed[k] = round(start + float(rng.uniform(1.0, 2.5)), 3)
-        removed_in_view[k] = True
-        chosen_in.append(k)
+    # picked up 1-2.5 s into a view of at least 5 s; if too few objects have one (a
+    # fast robot), 1 s to 2 s before the end of a view of at least 3 s
+    for shortest in (5.0, 3.0):
+        for k in order:
+            if len(chosen_in) == n_removed_in_view:
+                break
+            runs = [r for r in _intervals(times, flags[k])[1:] if r[1] - r[0] >= shortest]
+            if k in chosen_in or not runs:
+                continue
+            start, end = runs[int(rng.integers(len(runs)))]
+            latest = 2.5 if shortest == 5.0 else end - start - 2.0
+            removed[k] = round(start + float(rng.uniform(1.0, latest)), 3)
+            removed_in_view[k] = True
+            chosen_in.append(k)
     chosen_out = 0
     for k in order:
         if chosen_out == n_removed_out_of_view:

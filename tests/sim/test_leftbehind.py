@@ -298,3 +298,15 @@ def test_sensor_views_post_every_scan_once_in_order() -> None:
     assert keys == sorted(robot + cam2, key=lambda k: (k[0], order[k[1]]))
     assert all(with_view for *_, with_view in recorder.calls)
     assert sum(n for _, _, n, _ in recorder.calls) == len(fed)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_fast_robot_still_has_objects_picked_up_in_view(seed: int) -> None:
+    """bench_quality's quick size (twice the speed, 100 s): views are shorter, still two
+    objects are picked up in view with at least 2 s of view left."""
+    s = make_scenario("leftbehind", seed, duration=100.0, robot_speed=0.6)
+    in_view = [o for o in _objects(s).values() if o["removed_in_view"] is True]
+    assert len(in_view) == 2
+    for info in in_view:
+        assert _inside(info["removed"], info["all_view_intervals"])
+        assert _inside(info["removed"] + 2.0, info["all_view_intervals"])
