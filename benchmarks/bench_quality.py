@@ -55,6 +55,7 @@ from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.sim.checks import REGION_MARGIN, run_checks
+from semwm.sim.leftbehind import leftbehind_checks, with_sensor_views
 from semwm.sim.runner import (
     RunResult,
     WorldModelLike,
@@ -76,12 +77,21 @@ TARGET_RATIO = 0.8
 @dataclass(frozen=True)
 class ScenarioConfig:
     """Sizes of a scenario in the full and the quick run, and its scan rate (Hz)
-    per source (for the peers' clutter density)."""
+    per source (for the peers' clutter density).
+
+    A variant names its ``generator`` (default: the row's name) and may move the
+    knowledge's ``region`` (the knowledge file is otherwise used as is); ``trackers``:
+    who runs it (the Stone Soup peers here are 2-D only)."""
 
     full: dict[str, Any] = field(default_factory=dict)
     quick: dict[str, Any] = field(default_factory=dict)
     scan_rate: float = 10.0
+    generator: str | None = None
+    region: tuple[tuple[float, float], ...] | None = None
+    trackers: tuple[str, ...] = TRACKERS
 
+
+LEFTBEHIND_QUICK: dict[str, Any] = {"duration": 100.0, "robot_speed": 0.6}
 
 CONFIGS: dict[str, ScenarioConfig] = {
     "sim1": ScenarioConfig({}, {"duration": 10.0}, 2.5),
@@ -95,6 +105,87 @@ CONFIGS: dict[str, ScenarioConfig] = {
     "door_exits": ScenarioConfig({"duration": 45.0}, {"duration": 30.0}, 10.0),
     "datasheet": ScenarioConfig({"duration": 45.0}, {"duration": 30.0}, 10.0),
     "patrol": ScenarioConfig({}, {"duration": 45.0}, 10.0),
+    # issue 28: a robot leaves objects behind (200 s, each object seen three times and
+    # out of view about 60 s between; quick: twice the speed, 100 s, about 28 s out of
+    # view), with sensor poses (each scan's pose and heading as its sensor view) and
+    # without; its checks: semwm.sim.leftbehind. The peers get the same detections in
+    # both (they use no pose) and take 30-60 s a seed here: they run the first only.
+    "leftbehind": ScenarioConfig({}, LEFTBEHIND_QUICK, 10.0),
+    "leftbehind_noposes": ScenarioConfig(
+        {"poses": False},
+        {**LEFTBEHIND_QUICK, "poses": False},
+        10.0,
+        "leftbehind",
+        trackers=("semwm",),
+    ),
+    # issue 28: the region's edge passes through objects. 3-D: a table top on the
+    # region's floor, books against its side wall, a sign on its back wall; the same
+    # data with the region 0.3 m wider on those sides as the control
+    "region_edge": ScenarioConfig({}, {"duration": 10.0}, 5.0, trackers=("semwm",)),
+    "region_edge_control": ScenarioConfig(
+        {},
+        {"duration": 10.0},
+        5.0,
+        "region_edge",
+        region=((0.0, 4.3), (0.0, 3.3), (0.44, 2.5)),
+        trackers=("semwm",),
+    ),
+    # 2-D: sim1's table with the region's edges through both cups and both cans
+    "sim1_edge": ScenarioConfig(
+        {}, {"duration": 10.0}, 2.5, "sim1", region=((1.4, 2.6), (1.1, 1.9))
+    ),
+    # issue 28: the data's clutter or detection rate 3x or 1/3 the knowledge's (the
+    # knowledge file unchanged): false positives per frame x3 or /3; detection rate x3
+    # by a 3x frame rate with a third of the false positives per frame (clutter per
+    # second unchanged), /3 by a third of the recall
+    # (the peers run the datasheet's, not leftbehind's: see above)
+    **{
+        f"{base}_{what}": ScenarioConfig(
+            {**sizes, **change},
+            {**quick, **change},
+            float(change.get("rate", rate)),
+            base,
+            trackers=TRACKERS if base == "datasheet" else ("semwm",),
+        )
+        for base, sizes, quick, rate, changes in (
+            (
+                "datasheet",
+                {"duration": 45.0},
+                {"duration": 30.0},
+                10.0,
+                {
+                    "clutter_x3": {"false_positives_per_frame": 0.6},
+                    "clutter_div3": {"false_positives_per_frame": 0.2 / 3},
+                    "detection_x3": {"rate": 30.0, "false_positives_per_frame": 0.2 / 3},
+                    "detection_div3": {"recall": 0.3},
+                },
+            ),
+            (
+                "leftbehind",
+                {},
+                LEFTBEHIND_QUICK,
+                10.0,
+                {
+                    "clutter_x3": {
+                        "false_positives_per_frame": 0.6,
+                        "cam2_false_positives_per_frame": 0.3,
+                    },
+                    "clutter_div3": {
+                        "false_positives_per_frame": 0.2 / 3,
+                        "cam2_false_positives_per_frame": 0.1 / 3,
+                    },
+                    "detection_x3": {
+                        "rate": 30.0,
+                        "cam2_rate": 15.0,
+                        "false_positives_per_frame": 0.2 / 3,
+                        "cam2_false_positives_per_frame": 0.1 / 3,
+                    },
+                    "detection_div3": {"recall": 0.8 / 3, "cam2_recall": 0.8 / 3},
+                },
+            ),
+        )
+        for what, change in changes.items()
+    },
 }
 
 
@@ -128,15 +219,31 @@ def knowledge_for(knowledge_file: str, knowledge_dir: str | None) -> Knowledge:
     return load_knowledge(shipped_knowledge_path(knowledge_file))
 
 
-def _knowledge(scenario: Scenario) -> Knowledge:
+def _knowledge(scenario: Scenario, config: ScenarioConfig | None = None) -> Knowledge:
     directory = scenario.metadata.get("knowledge_dir")
-    return knowledge_for(scenario.knowledge_file, None if directory is None else str(directory))
+    knowledge = knowledge_for(
+        scenario.knowledge_file, None if directory is None else str(directory)
+    )
+    if config is None or config.region is None:
+        return knowledge
+    world = knowledge.world.model_copy(update={"region": config.region})
+    return knowledge.model_copy(update={"world": world})
+
+
+def make(name: str, seed: int, quick: bool) -> Scenario:
+    """The scenario of row ``name`` (its generator, at its sizes) for ``seed``."""
+    config = CONFIGS[name]
+    sizes = config.quick if quick else config.full
+    return make_scenario(config.generator or name, seed, **sizes)
 
 
 def _factory(
     tracker: str, scenario: Scenario, knowledge: Knowledge, rate: float, limit: float
 ) -> Callable[[Knowledge], WorldModelLike]:
     if tracker == "semwm":
+        if scenario.metadata.get("sensor_views"):  # leftbehind with poses
+            viewing = with_sensor_views(scenario)
+            return lambda k: TimeLimited(viewing(k), limit)
         return lambda k: TimeLimited(default_world_model(k), limit)
     tuning = tuning_from_knowledge(knowledge, scan_rate=rate, area=clutter_area(scenario))
     mode = {"stonesoup_gnn": "gnn", "stonesoup_jpda": "jpda"}[tracker]
@@ -148,6 +255,11 @@ def _row(result: RunResult) -> dict[str, Any]:
     final_truth = len(result.scenario.truth[-1].objects) if result.scenario.truth else 0
     final_world = len(result.worlds[-1].objects) if result.worlds else 0
     checks = [c.to_dict() for c in run_checks(result)]
+    views = (
+        [c.to_dict() for c in leftbehind_checks(result.scenario, result.worlds)]
+        if result.scenario.name == "leftbehind"
+        else None
+    )
     return {
         "status": "ok",
         "gospa": m.gospa.total,
@@ -160,6 +272,7 @@ def _row(result: RunResult) -> dict[str, Any]:
         "class_accuracy": m.class_accuracy.exact,
         "class_accuracy_taxonomy": m.class_accuracy.compatible,
         "checks": checks,
+        "view_checks": views,
         "passed": all(c["passed"] for c in checks),
         "time_per_detection_s": m.time_per_detection["mean_s"],
         "n_detections": result.n_detections,
@@ -174,8 +287,8 @@ def run_one(task: tuple[str, int, str, bool, float]) -> dict[str, Any]:
     config = CONFIGS[name]
     start = time.perf_counter()
     try:
-        scenario = make_scenario(name, seed, **(config.quick if quick else config.full))
-        knowledge = _knowledge(scenario)
+        scenario = make(name, seed, quick)
+        knowledge = _knowledge(scenario, config)
         factory = _factory(tracker, scenario, knowledge, config.scan_rate, limit)
         result = run_scenario(scenario, knowledge, progress=False, world_model_factory=factory)
         row = _row(result)
@@ -222,15 +335,42 @@ def summarise(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def view_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Per leftbehind check (semwm.sim.leftbehind) over the seeds: seeds passed, objects
+    failed/asked, and the worst seed (most objects failing, then most frames) with its
+    worst case."""
+    ok = [r for r in _ok(rows) if r.get("view_checks")]
+    result: dict[str, Any] = {}
+    for i, check in enumerate(ok[0]["view_checks"] if ok else []):
+        per = [(r["seed"], r["view_checks"][i]) for r in ok]
+        seed, worst = max(per, key=lambda p: (p[1]["objects_failed"], p[1]["frames_failed"]))
+        result[check["name"]] = {
+            "seeds_passed": sum(c["passed"] for _, c in per),
+            "n_seeds": len(per),
+            "objects_failed": sum(c["objects_failed"] for _, c in per),
+            "objects_asked": sum(c["objects_asked"] for _, c in per),
+            "frames_failed": sum(c["frames_failed"] for _, c in per),
+            "frames_asked": sum(c["frames_asked"] for _, c in per),
+            "worst_seed": seed if worst["objects_failed"] else None,
+            "worst": worst["worst"],
+            "worst_seed_objects": [worst["objects_failed"], worst["objects_asked"]],
+        }
+    return result
+
+
 def target(
     summary: dict[str, dict[str, Any]], rows: dict[str, list[dict[str, Any]]], floor: float = 0.0
 ) -> dict[str, Any]:
     """Issue 9's target for one scenario against the best Stone Soup tracker; also (for
     reading it, not part of the target) the ratio of what each tracker scores above
     ``floor``, the mean GOSPA no tracker can avoid (:func:`semwm.sim.runner.scenario_floor`)."""
+    if "semwm" not in summary:
+        return {"passed": False, "reason": "semwm not run"}
+    if not any(p in summary for p in PEERS):
+        return {"passed": None, "reason": "semwm only (no Stone Soup peer runs this scenario)"}
     n = summary["semwm"]["n_seeds"]
     peers = [p for p in PEERS if p in summary and summary[p]["n_ok"] == n]
-    if "semwm" not in summary or not peers:
+    if not peers:
         return {"passed": False, "reason": "semwm or every Stone Soup run missing/failed"}
     best = min(peers, key=lambda p: summary[p]["gospa_mean"])
     s, b = summary["semwm"], summary[best]
@@ -255,9 +395,21 @@ def target(
 
 
 def run(
-    names: Sequence[str], seeds: Sequence[int], *, quick: bool, jobs: int, limit: float
+    names: Sequence[str],
+    seeds: Sequence[int],
+    *,
+    quick: bool,
+    jobs: int,
+    limit: float,
+    trackers: Sequence[str] = TRACKERS,
 ) -> dict[str, Any]:
-    tasks = [(n, s, t, quick, limit) for n in names for t in TRACKERS for s in seeds]
+    tasks = [
+        (n, s, t, quick, limit)
+        for n in names
+        for t in TRACKERS
+        if t in CONFIGS[n].trackers and t in trackers
+        for s in seeds
+    ]
     start = time.perf_counter()
     rows: list[dict[str, Any]] = []
     with tqdm(total=len(tasks), unit="run", desc="quality") as bar:
@@ -296,15 +448,18 @@ def run(
                 key=lambda r: r["seed"],
             )
             for t in TRACKERS
+            if t in config.trackers and t in trackers
         }
         summary = {t: summarise(r) for t, r in by_tracker.items()}
         sizes = config.quick if quick else config.full
-        floors = [scenario_floor(make_scenario(name, seed, **sizes)) for seed in seeds]
-        scenario0 = make_scenario(name, 0, **sizes)
-        knowledge = _knowledge(scenario0)
+        floors = [scenario_floor(make(name, seed, quick)) for seed in seeds]
+        scenario0 = make(name, 0, quick)
+        knowledge = _knowledge(scenario0, config)
         first = next((r for r in by_tracker["semwm"] if r["status"] == "ok"), {})
         doc["scenarios"][name] = {
             "sizes": sizes,
+            "generator": config.generator or name,
+            "knowledge_region": None if config.region is None else [list(r) for r in config.region],
             "knowledge": knowledge.source,
             "association_model": knowledge.world.association_model,
             "gospa_c": scenario0.metadata.get("gospa_c"),
@@ -314,6 +469,9 @@ def run(
             "unobserved_floor": float(np.mean(floors)),
             "unobserved_floor_per_seed": floors,
             "target": target(summary, by_tracker, float(np.mean(floors))),
+            "view_checks": {t: view_summary(r) for t, r in by_tracker.items()}
+            if scenario0.name == "leftbehind"
+            else None,
             "runs": by_tracker,
         }
     return doc
@@ -367,6 +525,8 @@ def markdown(doc: dict[str, Any]) -> str:
                 f"/{len(doc['seeds'])} seeds; above the unobserved floor "
                 f"({fmt(e.get('unobserved_floor'))}): {fmt(t.get('ratio_above_floor'))}"
             )
+        elif t["passed"] is None:
+            lines.append(f"- **{name}** — {t['reason']}")
         else:
             lines.append(f"- **{name}: FAIL** — {t['reason']}")
     lines += [
@@ -386,24 +546,62 @@ def markdown(doc: dict[str, Any]) -> str:
                 f"{s['final_count_right']}/{s['n_ok']} | {fmt(s['class_accuracy_mean'])} | "
                 f"{s['checks_passed']}/{s['n_seeds']} ({per}) | {s['n_ok']}/{s['n_seeds']} |"
             )
+    views = {n: e for n, e in doc["scenarios"].items() if e.get("view_checks")}
+    if views:
+        lines += [
+            "",
+            "## Left behind (issue 28)",
+            "",
+            "semwm.sim.leftbehind: (a) every object out of the robot's view stays published "
+            "while present (once seen for 2 s); (b) every object removed in view leaves within "
+            "2 s of its next missed view; (b') the same for objects removed out of view "
+            "(reported, not in the acceptance); (c) every object cam2 never detected stays "
+            "published while present. The acceptance: (a) and (b) with poses, (c) without. "
+            "Worst seed: the most objects failing.",
+            "",
+            "| scenario | tracker | check | seeds passed | objects failed | frames failed "
+            "| worst seed: failing/asked, worst case |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for name, e in views.items():
+            for tracker, checks in e["view_checks"].items():
+                for check, v in checks.items():
+                    w = v["worst"] or {}
+                    worst = (
+                        f"{v['worst_seed']}: {v['worst_seed_objects'][0]}/"
+                        f"{v['worst_seed_objects'][1]}, {w.get('object')}: {w.get('detail')}"
+                        if v["worst_seed"] is not None
+                        else "—"
+                    )
+                    lines.append(
+                        f"| {name} | {tracker} | {check} | {v['seeds_passed']}/{v['n_seeds']} "
+                        f"| {v['objects_failed']}/{v['objects_asked']} "
+                        f"| {v['frames_failed']}/{v['frames_asked']} | {worst} |"
+                    )
     for name, e in doc["scenarios"].items():
+        runs = e["runs"]
+        moved = (
+            f", the knowledge's region moved to {e['knowledge_region']}"
+            if e.get("knowledge_region")
+            else ""
+        )
         lines += [
             "",
             f"## {name}",
             "",
-            f"Knowledge {Path(str(e['knowledge'])).name} (association_model "
-            f"{e['association_model']}), sizes {e['sizes'] or 'default'}, "
+            f"Generator {e.get('generator', name)}, knowledge {Path(str(e['knowledge'])).name}"
+            f"{moved} (association_model {e['association_model']}), "
+            f"sizes {e['sizes'] or 'default'}, "
             f"{fmt(e['duration_s'])} s, {fmt(e['mean_detections'])} detections per seed "
             f"on average, GOSPA c = {e['gospa_c']}. Cells: GOSPA, ID switches, final "
             "objects/truth, class accuracy, checks.",
             "",
-            "| seed | " + " | ".join(TRACKERS) + " | failed checks (semwm) |",
-            "|---|" + "---|" * (len(TRACKERS) + 1),
+            "| seed | " + " | ".join(runs) + " | failed checks (semwm) |",
+            "|---|" + "---|" * (len(runs) + 1),
         ]
-        runs = e["runs"]
         for i, seed in enumerate(doc["seeds"]):
             cells = []
-            for tracker in TRACKERS:
+            for tracker in runs:
                 c = _cell(runs[tracker][i])
                 cells.append(" / ".join(c[:5]))
             lines.append(f"| {seed} | " + " | ".join(cells) + f" | {_cell(runs['semwm'][i])[5]} |")
@@ -435,6 +633,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument(
         "--scenario", nargs="+", choices=sorted(CONFIGS), default=list(CONFIGS), metavar="NAME"
     )
+    parser.add_argument(
+        "--trackers",
+        nargs="+",
+        choices=TRACKERS,
+        default=list(TRACKERS),
+        help="who runs (default all; semwm alone for a fast look at its own rows)",
+    )
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output directory")
     parser.add_argument(
         "--jobs", type=int, default=2, help="worker processes (default 2: this machine's cores)"
@@ -451,7 +656,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if args.seeds < 1:
         parser.error(f"--seeds must be at least 1; got {args.seeds}")
     doc = run(
-        args.scenario, range(args.seeds), quick=args.quick, jobs=args.jobs, limit=args.time_limit
+        args.scenario,
+        range(args.seeds),
+        quick=args.quick,
+        jobs=args.jobs,
+        limit=args.time_limit,
+        trackers=args.trackers,
     )
     text = markdown(doc)
     stem = "quality_quick" if args.quick else "quality"

@@ -16,6 +16,8 @@ every truth time) and answers one yes/no question with a one-line reason:
   the whole run").
 * :func:`static_objects_kept`: every static real object, once reported, stays
   published under one id with its class while the sensor looks elsewhere (patrol).
+* leftbehind (issue 28): :func:`semwm.sim.leftbehind.acceptance`'s checks of the
+  run's variant, (a) and (b) with sensor poses, (c) without.
 
 :data:`SCENARIO_CHECKS` says which checks apply to which scenario. Frames are
 matched by the GOSPA assignment of :func:`semwm.sim.metrics.gospa_frame` with the
@@ -29,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from semwm.sim.leftbehind import ViewCheck, acceptance
 from semwm.sim.metrics import gospa_frame
 from semwm.sim.runner import RunResult, truth_points, world_points
 from semwm.sim.scenarios import Region, TruthFrame
@@ -270,6 +273,15 @@ def _patrol(result: RunResult) -> list[CheckResult]:
     ]
 
 
+def view_check(check: ViewCheck) -> CheckResult:
+    """A :class:`semwm.sim.leftbehind.ViewCheck` as a pass/fail line."""
+    return CheckResult(check.name, check.passed, check.detail())
+
+
+def _leftbehind(result: RunResult) -> list[CheckResult]:
+    return [view_check(c) for c in acceptance(result.scenario, result.worlds)]
+
+
 SCENARIO_CHECKS: dict[str, Callable[[RunResult], list[CheckResult]]] = {
     "sim1": _sim1_like,
     "tabletop_wrong_labels": _sim1_like,
@@ -279,6 +291,8 @@ SCENARIO_CHECKS: dict[str, Callable[[RunResult], list[CheckResult]]] = {
     "robocup": _robocup,
     "datasheet": _datasheet,
     "patrol": _patrol,
+    "leftbehind": _leftbehind,
+    "region_edge": _sim1_like,
 }
 """Issue 9's acceptance checks per scenario name (sim1, sim2, robocup as the issue
 states them; each variant gets the checks of the scenario it hardens)."""

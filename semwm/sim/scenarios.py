@@ -21,10 +21,16 @@ Harder variants for the world-quality benchmark (issue 9, ``benchmarks/bench_qua
   meant for a knowledge file written only from the sensor's datasheet.
 * :func:`patrol`: a robot patrolling a warehouse with a short-range detector: pallets
   and people out of view most of the time (a datasheet-only knowledge file).
+* :func:`leftbehind`: a robot patrolling a room leaves objects on shelves and tables
+  behind (out of view about 60 s, then seen again); some are picked up in view, some
+  out of view; a fixed second camera elsewhere (issue 28).
+* :func:`region_edge`: 3-D objects on the region's edge: a table top on its floor,
+  books against its side wall, a sign on its back wall (issue 28).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -1259,6 +1265,507 @@ def patrol(
     )
 
 
+# --------------------------------------------------------------------------- leftbehind
+
+LEFTBEHIND_REGION: Region = ((0.0, 12.0), (0.0, 8.0))
+"""The room of :func:`leftbehind` (m)."""
+LEFTBEHIND_LOOP: tuple[tuple[float, float], ...] = (
+    (2.5, 2.5),
+    (9.5, 2.5),
+    (9.5, 5.5),
+    (2.5, 5.5),
+)
+"""The corners of the robot's closed route, driven counter-clockwise (m): 2.5 m from
+every wall, 20 m around."""
+LEFTBEHIND_CLASSES = ("Cup", "Bottle", "Book")
+"""Classes of :func:`leftbehind` (``benchmarks/knowledge/leftbehind.yaml``)."""
+LEFTBEHIND_CAM2_POSE = (0.3, 7.7, -math.pi / 4.0)
+"""The fixed camera ``cam2``: in the room's top-left corner, looking diagonally into
+the room (x, y in m, heading in rad counter-clockwise from the x axis)."""
+
+
+def in_sector(
+    points: np.ndarray,
+    origin: Sequence[float] | np.ndarray,
+    heading: float,
+    reach: float,
+    fov_deg: float,
+) -> np.ndarray:
+    """Whether each point ``(N, 2)`` lies in the disc sector of radius ``reach`` (m) and
+    opening ``fov_deg`` (degrees) around ``heading`` (rad) at ``origin``: ``(N,)``."""
+    offset = np.asarray(points, dtype=float)[:, :2] - np.asarray(origin, dtype=float)[:2]
+    distance = np.linalg.norm(offset, axis=1)
+    bearing = np.arctan2(offset[:, 1], offset[:, 0]) - heading
+    bearing = (bearing + np.pi) % (2.0 * np.pi) - np.pi
+    result: np.ndarray = (distance <= reach) & (np.abs(bearing) <= math.radians(fov_deg) / 2.0)
+    return result
+
+
+def _loop_pose(corners: np.ndarray, distance: float, look: float) -> tuple[float, float, float]:
+    """Position and camera heading ``distance`` (m) along the closed route: the direction
+    of travel turned by ``look`` (rad)."""
+    here = _loop_position(corners, distance)
+    ahead = _loop_position(corners, distance + 1e-3)
+    travel = math.atan2(float(ahead[1] - here[1]), float(ahead[0] - here[0]))
+    heading = (travel + look + math.pi) % (2.0 * math.pi) - math.pi
+    return float(here[0]), float(here[1]), heading
+
+
+def _intervals(times: np.ndarray, flags: np.ndarray) -> list[tuple[float, float]]:
+    """``[first, last]`` times of each run of consecutive true ``flags``."""
+    runs: list[tuple[float, float]] = []
+    start: float | None = None
+    previous = 0.0
+    for t, flag in zip(times.tolist(), flags.tolist(), strict=True):
+        if flag and start is None:
+            start = t
+        if not flag and start is not None:
+            runs.append((start, previous))
+            start = None
+        previous = t
+    if start is not None:
+        runs.append((start, float(times[-1])))
+    return runs
+
+
+def _wall_place(rng: np.random.Generator, region: Region) -> tuple[np.ndarray, str]:
+    """A place on a shelf (0.25-0.35 m from a wall) or a table (0.5-0.8 m) along one of
+    the room's walls, at least 1 m from a corner."""
+    (x0, x1), (y0, y1) = region
+    wall = int(rng.integers(4))
+    furniture = "shelf" if rng.random() < 0.5 else "table"
+    depth = rng.uniform(0.25, 0.35) if furniture == "shelf" else rng.uniform(0.5, 0.8)
+    if wall in (0, 2):  # bottom, top
+        along = rng.uniform(x0 + 1.0, x1 - 1.0)
+        return np.array([along, y0 + depth if wall == 0 else y1 - depth]), furniture
+    along = rng.uniform(y0 + 1.0, y1 - 1.0)
+    return np.array([x0 + depth if wall == 3 else x1 - depth, along]), furniture
+
+
+def _sector_points(
+    rng: np.random.Generator,
+    origin: Sequence[float],
+    heading: float,
+    reach: float,
+    fov_deg: float,
+    n: int,
+) -> list[np.ndarray]:
+    """``n`` points uniform over a disc sector (:func:`in_sector`'s), those inside the
+    room kept (the random numbers are drawn for all ``n``)."""
+    half = math.radians(fov_deg) / 2.0
+    points = []
+    for _ in range(n):
+        radius = reach * math.sqrt(rng.random())
+        angle = heading + rng.uniform(-half, half)
+        xy = np.asarray(origin[:2], dtype=float) + radius * np.array(
+            [math.cos(angle), math.sin(angle)]
+        )
+        if _inside(xy, LEFTBEHIND_REGION):
+            points.append(xy)
+    return points
+
+
+def leftbehind(
+    rng: np.random.Generator,
+    *,
+    poses: bool = True,
+    duration: float = 200.0,
+    rate: float = 10.0,
+    recall: float = 0.8,
+    false_positives_per_frame: float = 0.2,
+    noise: float = 0.05,
+    sensor_range: float = 4.0,
+    field_of_view: float = 90.0,
+    look: float = -math.pi / 4.0,
+    robot_speed: float = 0.3,
+    cam2_rate: float = 5.0,
+    cam2_recall: float = 0.8,
+    cam2_false_positives_per_frame: float = 0.1,
+    cam2_range: float = 5.0,
+    cam2_field_of_view: float = 90.0,
+    n_objects: tuple[int, int] = (8, 11),
+    n_removed_in_view: int = 2,
+    n_removed_out_of_view: int = 2,
+    n_put_down: tuple[int, int] = (1, 2),
+    truth_rate: float = 5.0,
+    seed: int | None = None,
+) -> Scenario:
+    """A robot patrols a room and leaves objects behind: seen, out of view about 60 s,
+    seen again (issue 28: what the world concludes from not seeing something).
+
+    The robot drives the closed route :data:`LEFTBEHIND_LOOP` counter-clockwise at
+    ``robot_speed`` m/s (a lap of about 67 s at 0.3 m/s) in the 12 x 8 m room
+    (:data:`LEFTBEHIND_REGION`). Its camera (``source="robot"``, detector ``camera``)
+    looks ``look`` rad off the direction of travel (default 45 degrees to the right,
+    towards the walls), runs at ``rate`` Hz and reports each object in its view (a
+    disc sector of radius ``sensor_range`` m and opening ``field_of_view`` degrees)
+    with probability ``recall``, position noise ``noise`` (m, std), plus
+    ``false_positives_per_frame`` false reports (Poisson, uniform over the part of
+    its view inside the room, a random class). A fixed camera ``cam2`` (detector
+    ``cam2``) at :data:`LEFTBEHIND_CAM2_POSE` watches the room's top-left part the
+    same way at ``cam2_rate`` Hz (``cam2_recall``, ``cam2_false_positives_per_frame``,
+    ``cam2_range``, ``cam2_field_of_view``).
+
+    Between ``n_objects[0]`` and ``n_objects[1]`` static objects (Cup, Bottle, Book)
+    stand on shelves and tables along the walls, at least 1 m apart, each placed so
+    that the robot's camera sees it at least twice in the run. ``n_removed_in_view``
+    of them are picked up while in the robot's view (at 1-2.5 s into a view interval
+    of at least 5 s, not the object's first; else 1 s into to 2 s before the end of
+    one of at least 3 s), ``n_removed_out_of_view`` while out of
+    it (in the middle of a gap between two view intervals); ``n_put_down[0]`` to
+    ``n_put_down[1]`` new objects are put down while out of view (and seen later).
+
+    ``poses``: with ``True`` every detection carries ``sensor_position`` (the robot's
+    position, cam2's); ``metadata["poses"]`` always holds the robot's
+    ``[time, x, y, heading]`` at every scan in ``metadata["robot_poses"]``;
+    ``metadata["sensor_views"]`` (= ``poses``) says whether a runner should also pass
+    them, and cam2's, as sensor views (:func:`semwm.sim.leftbehind.with_sensor_views`).
+
+    Ground truth about views in ``metadata["objects"]``, per object id: ``class``,
+    ``position``, ``placed`` / ``removed`` (s; ``None``: from the start / never),
+    ``removed_in_view`` (bool or ``None``), ``view_intervals`` (``[first, last]`` scan
+    times the object is truly in the robot's view while present), ``robot_detections``
+    and ``cam2_detections`` (counts), and ``cam2_view`` (ever in cam2's view).
+    """
+    if min(n_removed_in_view, n_removed_out_of_view, n_put_down[0]) < 0:
+        raise ValueError("the numbers of removed and put-down objects must be >= 0")
+    times = _frame_times(rate, duration)
+    corners = np.asarray(LEFTBEHIND_LOOP, dtype=float)
+    robot = [_loop_pose(corners, robot_speed * float(t), look) for t in times]
+    robot_xy = np.array([(x, y) for x, y, _ in robot])
+    cam2_xy = np.asarray(LEFTBEHIND_CAM2_POSE[:2])
+    cam2_times = _frame_times(cam2_rate, duration)
+
+    def view_flags(place: np.ndarray) -> np.ndarray:
+        offset = place[None, :] - robot_xy
+        distance = np.linalg.norm(offset, axis=1)
+        bearing = np.arctan2(offset[:, 1], offset[:, 0]) - np.array([h for _, _, h in robot])
+        bearing = (bearing + np.pi) % (2.0 * np.pi) - np.pi
+        flags: np.ndarray = (distance <= sensor_range) & (
+            np.abs(bearing) <= math.radians(field_of_view) / 2.0
+        )
+        return flags
+
+    n_total = int(rng.integers(n_objects[0], n_objects[1] + 1))
+    n_new = int(rng.integers(n_put_down[0], n_put_down[1] + 1))
+    places: list[np.ndarray] = []
+    furniture: list[str] = []
+    flags: list[np.ndarray] = []
+    for _ in range(1000 * (n_total + n_new)):
+        place, kind = _wall_place(rng, LEFTBEHIND_REGION)
+        if any(np.linalg.norm(place - q) < 1.0 for q in places):
+            continue
+        f = view_flags(place)
+        if len(_intervals(times, f)) < 3:
+            continue
+        places.append(place)
+        furniture.append(kind)
+        flags.append(f)
+        if len(places) == n_total + n_new:
+            break
+    else:
+        raise ValueError(f"cannot place {n_total + n_new} objects the robot sees three times")
+    count = len(places)
+    classes = [
+        LEFTBEHIND_CLASSES[int(i)] for i in rng.integers(len(LEFTBEHIND_CLASSES), size=count)
+    ]
+    ids = [f"{cls.lower()}{k + 1}" for k, cls in enumerate(classes)]
+    placed = [0.0] * count
+    removed: list[float | None] = [None] * count
+    removed_in_view: list[bool | None] = [None] * count
+    step = 1.0 / rate
+    # put down while out of view: in the middle of a gap between the 1st and 2nd view
+    for k in range(n_total, count):
+        runs = _intervals(times, flags[k])
+        gap = (runs[0][1], runs[1][0])
+        placed[k] = round(
+            float(rng.uniform(gap[0] + 0.4 * (gap[1] - gap[0]), gap[0] + 0.6 * (gap[1] - gap[0]))),
+            3,
+        )
+    order = [int(k) for k in rng.permutation(n_total)]
+    chosen_in: list[int] = []
+    # picked up 1-2.5 s into a view of at least 5 s; if too few objects have one (a
+    # fast robot), 1 s to 2 s before the end of a view of at least 3 s
+    for shortest in (5.0, 3.0):
+        for k in order:
+            if len(chosen_in) == n_removed_in_view:
+                break
+            runs = [r for r in _intervals(times, flags[k])[1:] if r[1] - r[0] >= shortest]
+            if k in chosen_in or not runs:
+                continue
+            start, end = runs[int(rng.integers(len(runs)))]
+            latest = 2.5 if shortest == 5.0 else end - start - 2.0
+            removed[k] = round(start + float(rng.uniform(1.0, latest)), 3)
+            removed_in_view[k] = True
+            chosen_in.append(k)
+    chosen_out = 0
+    for k in order:
+        if chosen_out == n_removed_out_of_view:
+            break
+        if k in chosen_in:
+            continue
+        runs = _intervals(times, flags[k])
+        j = int(rng.integers(1, len(runs) - 1)) if len(runs) > 2 else 0
+        gap = (runs[j][1], runs[j + 1][0])
+        removed[k] = round(
+            float(rng.uniform(gap[0] + 0.4 * (gap[1] - gap[0]), gap[0] + 0.6 * (gap[1] - gap[0]))),
+            3,
+        )
+        removed_in_view[k] = False
+        chosen_out += 1
+
+    def present(k: int, t: float) -> bool:
+        gone = removed[k]
+        return placed[k] <= t + 1e-9 and (gone is None or t < gone - 1e-9)
+
+    cam2_view = [
+        bool(
+            in_sector(p[None, :], cam2_xy, LEFTBEHIND_CAM2_POSE[2], cam2_range, cam2_field_of_view)[
+                0
+            ]
+        )
+        for p in places
+    ]
+    robot_count = [0] * count
+    cam2_count = [0] * count
+    detections: list[Detection] = []
+    cam2_set = set(np.round(cam2_times, 9).tolist())
+    robot_sensor = None
+    for i, t in enumerate(times.tolist()):
+        x, y, heading = robot[i]
+        robot_sensor = (round(x, 6), round(y, 6)) if poses else None
+        for k in range(count):
+            if not (flags[k][i] and present(k, t)) or rng.random() >= recall:
+                continue
+            robot_count[k] += 1
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=classes[k],
+                    position=_pos(places[k] + rng.normal(0.0, noise, 2)),
+                    source="robot",
+                    detector="camera",
+                    sensor_position=robot_sensor,
+                )
+            )
+        for xy in _sector_points(
+            rng,
+            (x, y),
+            heading,
+            sensor_range,
+            field_of_view,
+            rng.poisson(false_positives_per_frame),
+        ):
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=LEFTBEHIND_CLASSES[int(rng.integers(len(LEFTBEHIND_CLASSES)))],
+                    position=_pos(xy),
+                    source="robot",
+                    detector="camera",
+                    sensor_position=robot_sensor,
+                )
+            )
+        if round(t, 9) not in cam2_set:
+            continue
+        cam2_sensor = _pos(cam2_xy) if poses else None
+        for k in range(count):
+            if not (cam2_view[k] and present(k, t)) or rng.random() >= cam2_recall:
+                continue
+            cam2_count[k] += 1
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=classes[k],
+                    position=_pos(places[k] + rng.normal(0.0, noise, 2)),
+                    source="cam2",
+                    detector="cam2",
+                    sensor_position=cam2_sensor,
+                )
+            )
+        for xy in _sector_points(
+            rng,
+            LEFTBEHIND_CAM2_POSE[:2],
+            LEFTBEHIND_CAM2_POSE[2],
+            cam2_range,
+            cam2_field_of_view,
+            rng.poisson(cam2_false_positives_per_frame),
+        ):
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=LEFTBEHIND_CLASSES[int(rng.integers(len(LEFTBEHIND_CLASSES)))],
+                    position=_pos(xy),
+                    source="cam2",
+                    detector="cam2",
+                    sensor_position=cam2_sensor,
+                )
+            )
+    truth = [
+        TruthFrame(
+            float(t),
+            tuple(
+                TruthObject(ids[k], classes[k], _pos(places[k]), (0.0, 0.0))
+                for k in range(count)
+                if present(k, float(t))
+            ),
+        )
+        for t in _frame_times(truth_rate, duration)
+    ]
+
+    def present_runs(k: int) -> list[list[float]]:
+        alive = np.array([present(k, float(t)) for t in times])
+        return [[round(a, 6), round(b, 6)] for a, b in _intervals(times, flags[k] & alive)]
+
+    objects = {
+        ids[k]: {
+            "class": classes[k],
+            "position": list(_pos(places[k])),
+            "furniture": furniture[k],
+            "placed": placed[k] if k >= n_total else None,
+            "removed": removed[k],
+            "removed_in_view": removed_in_view[k],
+            "view_intervals": present_runs(k),
+            "all_view_intervals": [
+                [round(a, 6), round(b, 6)] for a, b in _intervals(times, flags[k])
+            ],
+            "robot_detections": robot_count[k],
+            "cam2_detections": cam2_count[k],
+            "cam2_view": cam2_view[k],
+        }
+        for k in range(count)
+    }
+    return Scenario(
+        name="leftbehind",
+        truth=truth,
+        detections=detections,
+        knowledge_file="leftbehind.yaml",
+        duration=float(times[-1]),
+        region=LEFTBEHIND_REGION,
+        seed=seed,
+        metadata={
+            "gospa_c": 1.0,
+            "knowledge_dir": "benchmarks/knowledge",
+            "poses": poses,
+            "sensor_views": poses,
+            "scan_step": step,
+            "sensor_range": sensor_range,
+            "field_of_view": field_of_view,
+            "coverage_area": float(np.pi * sensor_range**2 * field_of_view / 360.0),
+            "cam2_pose": list(LEFTBEHIND_CAM2_POSE),
+            "cam2_range": cam2_range,
+            "cam2_field_of_view": cam2_field_of_view,
+            "cam2_times": [round(float(t), 6) for t in cam2_times],
+            "robot_poses": [
+                [round(float(t), 6), round(x, 6), round(y, 6), round(h, 6)]
+                for t, (x, y, h) in zip(times, robot, strict=True)
+            ],
+            "objects": objects,
+        },
+    )
+
+
+# --------------------------------------------------------------------------- region_edge
+
+EDGE_ROOM: Region = ((0.0, 4.0), (0.0, 3.0), (0.0, 2.5))
+"""The room of :func:`region_edge` (m, 3-D): a side wall at x = 4, a back wall at y = 3."""
+EDGE_TABLE_TOP = 0.74
+"""Height of the table top (m): where ``benchmarks/knowledge/region_edge.yaml``'s region
+starts (the area the robot works in: above the table)."""
+EDGE_CLASSES = ("Table", "Cup", "Book", "Sign")
+
+
+def region_edge(
+    rng: np.random.Generator,
+    *,
+    duration: float = 20.0,
+    rate: float = 5.0,
+    recall: float = 0.8,
+    table_recall: float = 0.4,
+    clutter_rate: float = 0.5,
+    noise: float = 0.05,
+    table_noise: float = 0.1,
+    n_cups: tuple[int, int] = (2, 3),
+    n_books: tuple[int, int] = (2, 3),
+    seed: int | None = None,
+) -> Scenario:
+    """Objects on the region's edge (issue 28: the region is a soft fact), in 3-D.
+
+    A fixed camera (``camera``) watches a room corner (:data:`EDGE_ROOM`) whose working
+    region (``benchmarks/knowledge/region_edge.yaml``) starts at the table top's height
+    :data:`EDGE_TABLE_TOP` and ends at the side wall x = 4 and the back wall y = 3. Its
+    edge passes through the objects: the Table is reported at the centre of its top
+    (z = 0.74, on the region's floor), ``n_cups`` Cups stand on it (centres 5 cm above
+    it: one sigma of the noise), ``n_books`` Books stand on shelves against the side
+    wall (centres 0-8 cm from it), and a Sign hangs on the back wall (centre on it).
+
+    The camera scans at ``rate`` Hz and reports each object with ``recall``
+    (the Table with ``table_recall``), isotropic noise ``noise`` (``table_noise``) m;
+    clutter: Poisson, ``clutter_rate`` per second, uniform over the room (below the
+    table top too: the knowledge's region leaves it out) and the classes.
+    """
+    (_, x1), (y0, y1), _ = EDGE_ROOM
+    table = np.array([rng.uniform(1.2, 2.3), rng.uniform(0.9, 1.6), EDGE_TABLE_TOP])
+    objects: list[tuple[str, str, np.ndarray]] = [("table", "Table", table)]
+    cups = _separated_points(
+        rng, ((-0.5, 0.5), (-0.35, 0.35)), int(rng.integers(n_cups[0], n_cups[1] + 1)), 0.25, 0.0
+    )
+    for i, (dx, dy) in enumerate(cups):
+        objects.append((f"cup{i + 1}", "Cup", table + np.array([dx, dy, 0.05])))
+    n = int(rng.integers(n_books[0], n_books[1] + 1))
+    along = _separated_points(rng, ((y0 + 0.4, y1 - 0.4),), n, 0.5, 0.0)
+    for i, (y,) in enumerate(along):
+        shelf = (0.45, 1.05, 1.65)[int(rng.integers(3))]
+        objects.append(
+            (f"book{i + 1}", "Book", np.array([x1 - rng.uniform(0.0, 0.08), y, shelf + 0.12]))
+        )
+    objects.append(("sign", "Sign", np.array([rng.uniform(1.0, 3.0), y1, rng.uniform(1.5, 2.0)])))
+    times = _frame_times(rate, duration)
+    truth_objects = tuple(TruthObject(i, c, _pos(p), (0.0, 0.0, 0.0)) for i, c, p in objects)
+    truth = [TruthFrame(float(t), truth_objects) for t in times]
+    detections: list[Detection] = []
+    for t in times:
+        t = float(t)
+        for _, cls, place in objects:
+            is_table = cls == "Table"
+            if rng.random() >= (table_recall if is_table else recall):
+                continue
+            sigma = table_noise if is_table else noise
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=cls,
+                    position=_pos(place + rng.normal(0.0, sigma, 3)),
+                    source="camera",
+                    detector="camera",
+                )
+            )
+        for xyz in _uniform(rng, EDGE_ROOM, rng.poisson(clutter_rate / rate)):
+            detections.append(
+                Detection(
+                    time=t,
+                    cls=EDGE_CLASSES[int(rng.integers(len(EDGE_CLASSES)))],
+                    position=_pos(xyz),
+                    source="camera",
+                    detector="camera",
+                )
+            )
+    return Scenario(
+        name="region_edge",
+        truth=truth,
+        detections=detections,
+        knowledge_file="region_edge.yaml",
+        duration=float(times[-1]),
+        region=EDGE_ROOM,
+        seed=seed,
+        metadata={
+            "gospa_c": 0.5,
+            "knowledge_dir": "benchmarks/knowledge",
+            "on_edge": {i: c for i, c, _ in objects},
+        },
+    )
+
+
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "sim1": sim1,
     "sim2": sim2,
@@ -1269,6 +1776,8 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "door_exits": door_exits,
     "datasheet": datasheet,
     "patrol": patrol,
+    "leftbehind": leftbehind,
+    "region_edge": region_edge,
 }
 """Generators by name, as ``semwm simulate NAME`` knows them."""
 
