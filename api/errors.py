@@ -89,13 +89,25 @@ def json_safe(value: Any) -> Any:
     """
     if isinstance(value, float):
         return value if math.isfinite(value) else str(value)
-    if value is None or isinstance(value, str | int | bool):
+    if isinstance(value, str):
+        return _utf8_safe(value)
+    if value is None or isinstance(value, int | bool):
         return value
     if isinstance(value, dict):
-        return {str(k): json_safe(v) for k, v in value.items()}
+        return {_utf8_safe(str(k)): json_safe(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
         return [json_safe(v) for v in value]
-    return str(value)
+    return _utf8_safe(str(value))
+
+
+def _utf8_safe(text: str) -> str:
+    """``text``, with a lone surrogate (``"\\ud800"``, which JSON parsers accept but UTF-8
+    cannot encode) written as its escape: echoed in a 422, it must not make it a 500."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+    return text
 
 
 def validation_items(errors: Sequence[Any], prefix: Loc = ()) -> list[dict[str, Any]]:
@@ -104,7 +116,7 @@ def validation_items(errors: Sequence[Any], prefix: Loc = ()) -> list[dict[str, 
     for error in errors:
         item: dict[str, Any] = {
             "loc": [*prefix, *error.get("loc", ())],
-            "msg": str(error.get("msg", "")),
+            "msg": _utf8_safe(str(error.get("msg", ""))),
             "type": str(error.get("type", "value_error")),
         }
         if "input" in error:

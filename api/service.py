@@ -20,6 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Generic, Literal, Protocol, TypeVar
 
+from pydantic import ValidationError
+
 from api.errors import (
     ApiError,
     ConflictError,
@@ -27,11 +29,18 @@ from api.errors import (
     KnowledgeFileError,
     Loc,
     NotFoundError,
+    validation_items,
 )
 from api.ordered_lock import TimeOrderedLock
 from semwm import IngestResult, WorldModel, load_knowledge
 from semwm.clock import Exchange
-from semwm.detection import Detection, DetectionError, DetectionProblem, OutOfOrderError
+from semwm.detection import (
+    Detection,
+    DetectionError,
+    DetectionProblem,
+    OutOfOrderError,
+    SensorReport,
+)
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
 from semwm.persistence.records import (
     Record,
@@ -408,6 +417,8 @@ class WorldService:
             placed = [
                 d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
             ]
+            if sensor is not None:
+                _check_sensor(sensor)  # before the journal writes it (issue 30)
             started = time.perf_counter()
             with self._change():
                 self._check_sources(placed, batch)
@@ -799,6 +810,15 @@ def _knowledge_item(path: Sequence[str | int], message: str, index: int) -> dict
     else:
         loc = ["knowledge", *parts]
     return {"loc": loc, "msg": message, "type": "knowledge", "path": parts}
+
+
+def _check_sensor(sensor: Mapping[str, Any]) -> None:
+    """A sensor view's values (finite pose...), checked before anything journals them:
+    422 at ``["body", "sensor", ...]``."""
+    try:
+        SensorReport.model_validate(sensor)
+    except ValidationError as error:
+        raise InvalidError(validation_items(error.errors(), ("body", "sensor"))) from None
 
 
 def _first_source(detections: Sequence[dict[str, Any] | Detection]) -> str | None:
