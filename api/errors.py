@@ -26,6 +26,7 @@ class ApiError(Exception):
     """A request refused with ``status`` and a message."""
 
     status = 400
+    headers: dict[str, str] | None = None  # response headers (Retry-After...)
 
     def __init__(self, message: str) -> None:
         super().__init__(message)
@@ -45,6 +46,17 @@ class ConflictError(ApiError):
     """409: the request is well formed but conflicts with the state (e.g. too old)."""
 
     status = 409
+
+
+class StorageUnavailable(ApiError):
+    """507 (the disk is full) or 503 (another store failure) with ``Retry-After``: the
+    change was neither stored nor applied; reads are served and writes go through
+    again once the store can take them."""
+
+    def __init__(self, message: str, *, full: bool, retry_after: int) -> None:
+        super().__init__(message)
+        self.status = 507 if full else 503
+        self.headers = {"Retry-After": str(retry_after)}
 
 
 class InvalidError(ApiError):
@@ -139,7 +151,7 @@ def install_error_handlers(app: FastAPI) -> None:
 
     async def on_api_error(request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, ApiError)
-        return JSONResponse(status_code=exc.status, content=exc.body())
+        return JSONResponse(status_code=exc.status, content=exc.body(), headers=exc.headers)
 
     async def on_validation_error(request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, RequestValidationError)

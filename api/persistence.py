@@ -43,6 +43,7 @@ def attach_persistence(app: FastAPI, settings: Settings) -> Iterator[None]:
             stack.callback(durable.close)
             service.use_model(durable.model)
             service.hooks.append(durable)
+            service.storage_probe = durable.writable
             app.state.durable = durable
             logger.info("data dir %s: %s", settings.data_dir, durable.recovery.to_dict())
         if service is not None and settings.record is not None:

@@ -29,6 +29,7 @@ from api.errors import (
     KnowledgeFileError,
     Loc,
     NotFoundError,
+    StorageUnavailable,
     validation_items,
 )
 from api.ordered_lock import TimeOrderedLock
@@ -246,6 +247,9 @@ class WorldService:
         self._sources_lock = threading.Lock()  # taken inside self._lock, never around it
         self.clock = clock
         self._locals: dict[str, LocalModel] = {}  # two levels: robots' local models
+        self._storage_problem: str | None = None  # the store refused the last write
+        self.storage_probe: Callable[[], bool] | None = None  # can the store write again?
+        self.retry_after = 5  # s: Retry-After of a write the store refused
 
     def use_model(self, model: WorldModel) -> None:
         """Serve ``model`` from now on (the one a data directory restored)."""
@@ -260,11 +264,32 @@ class WorldService:
 
     @contextmanager
     def _hooked(self, record: Record) -> Iterator[None]:
-        """Apply a change inside every hook's ``applying`` (inside :meth:`_change`)."""
-        with ExitStack() as stack:
-            for hook in self.hooks:
-                stack.enter_context(hook.applying(record))
+        """Apply a change inside every hook's ``applying`` (inside :meth:`_change`).
+
+        A store that cannot write (:class:`~semwm.persistence.journal.WriteFailed`: a
+        full disk...) refuses the change: 507 or 503 with ``Retry-After``; nothing was
+        stored and :meth:`_change` undoes it in memory. ``/ready`` says so until the
+        store can write again (:attr:`storage_probe`) or a write succeeds."""
+        if not self.hooks:
             yield
+            return
+        from semwm.persistence.journal import WriteFailed
+
+        try:
+            with ExitStack() as stack:
+                for hook in self.hooks:
+                    stack.enter_context(hook.applying(record))
+                yield
+        except WriteFailed as error:
+            what = "the data directory's disk is full" if error.full else "the store failed"
+            self._storage_problem = f"{what}: writes are refused ({error})"
+            raise StorageUnavailable(
+                f"{what}: the change was not applied and nothing of it was stored ({error}); "
+                f"reads are served; retry after {self.retry_after} s",
+                full=error.full,
+                retry_after=self.retry_after,
+            ) from None
+        self._storage_problem = None
 
     # -- listeners ----------------------------------------------------------------------------
 
@@ -684,6 +709,13 @@ class WorldService:
             )
         if self._failure is not None:
             reasons.append(self._failure)
+        problem = self._storage_problem
+        if problem is not None:
+            probe = self.storage_probe
+            if probe is not None and probe():
+                self._storage_problem = None  # space returned: writes will go through
+            else:
+                reasons.append(problem)
         return reasons
 
     def act(self, action: dict[str, Any]) -> Committed[tuple[list[int], int]]:

@@ -9,7 +9,7 @@
 """
 
 from semwm.persistence.durable import DurableWorld, Recovery
-from semwm.persistence.journal import SYNC_POLICIES, Journal, StoreError, SyncPolicy
+from semwm.persistence.journal import SYNC_POLICIES, Journal, StoreError, SyncPolicy, WriteFailed
 from semwm.persistence.records import (
     Record,
     RecordError,
@@ -31,6 +31,7 @@ __all__ = [
     "Replayer",
     "StoreError",
     "SyncPolicy",
+    "WriteFailed",
     "batch_record",
     "config_record",
     "knowledge_record",

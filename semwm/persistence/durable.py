@@ -19,6 +19,8 @@ read and replays the records after it; a damaged record ends the journal there
 from __future__ import annotations
 
 import logging
+import os
+import sqlite3
 import threading
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
@@ -28,7 +30,7 @@ from typing import IO, Any
 
 from semwm.detection import Detection
 from semwm.knowledge.model import Knowledge
-from semwm.persistence.journal import Journal, StoreError, SyncPolicy
+from semwm.persistence.journal import Journal, StoreError, SyncPolicy, WriteFailed
 from semwm.persistence.records import (
     DamagedRecord,
     Record,
@@ -89,6 +91,8 @@ class DurableWorld:
         self._lock = threading.RLock()
         self._last_snapshot = recovery.snapshot_seq or 0
         self.compactions = 0
+        self.write_failures = 0  # writes refused because the store failed (a full disk...)
+        self.write_error: str | None = None  # the last one's reason, until a write succeeds
 
     # -- opening ---------------------------------------------------------------------------
     @classmethod
@@ -147,41 +151,101 @@ class DurableWorld:
     def applying(self, record: Record) -> Iterator[None]:
         """Journal ``record`` around the code that applies it to :attr:`model`.
 
-        The record is appended in a transaction; if the body raises, the
-        transaction is rolled back (the change was refused and never happened),
-        else it is committed before this returns. Then a snapshot or a compaction
-        may follow.
+        The record, the snapshot due with it (every ``snapshot_every`` records) and the
+        change commit together or not at all: all are written in one transaction, which
+        is rolled back if the body raises (the change was refused and never happened)
+        or if a write fails (:class:`WriteFailed`, for example a full disk; the caller
+        undoes the change in memory). A compaction may follow; its failure loses
+        nothing (the records stay in the database) and is only logged.
         """
         with self._lock:
-            with self.journal.transaction():
-                seq = self.journal.append(record)
-                yield
-            if seq - self._last_snapshot >= self.snapshot_every:
-                self.snapshot()
+            snapshot_seq: int | None = None
+            try:
+                with self.journal.transaction():
+                    seq = self.journal.append(record)
+                    yield
+                    if seq - self._last_snapshot >= self.snapshot_every:
+                        snapshot_seq = self._save_snapshot(seq)
+            except WriteFailed as error:
+                self.write_failures += 1
+                self.write_error = str(error)
+                logger.error("%s", error)
+                raise
+            self.write_error = None
+            if snapshot_seq is not None:
+                self._last_snapshot = snapshot_seq
                 if self.journal.count() > self.compact_every:
-                    self.compact()
+                    try:
+                        self.compact()
+                    except (WriteFailed, OSError) as error:
+                        logger.warning("compaction failed; the records stay in the database: %s",
+                                       error)  # fmt: skip
+
+    def _save_snapshot(self, seq: int) -> int | None:
+        """Snapshot the model into the open transaction; ``None`` if it does not pickle."""
+        try:
+            snapshot = take_snapshot(self.model, seq)
+        except Exception as error:  # a state that does not pickle: journal only
+            logger.error("snapshot failed (the journal still has everything): %s", error)
+            return None
+        self.journal.save_snapshot(snapshot)
+        return seq
+
+    def writable(self, probe_bytes: int = 64 * 1024) -> bool:
+        """Whether ``probe_bytes`` can be written and synced in the data directory now
+        (a probe file, removed again): after a full disk, whether space has returned.
+        Needs no lock; touches nothing of the store."""
+        probe = self.journal.data_dir / ".semwm-space-probe"
+        try:
+            if self.journal.fault is not None:
+                self.journal.fault("probe")
+            with probe.open("wb") as handle:
+                handle.write(b"\0" * probe_bytes)
+                handle.flush()
+                os.fsync(handle.fileno())
+            return True
+        except (OSError, sqlite3.Error):
+            return False
+        finally:
+            probe.unlink(missing_ok=True)
+
+    @contextmanager
+    def _undoable(self, record: Record) -> Iterator[None]:
+        """:meth:`applying`, and the model as it was if the change or its write fails."""
+        saved = {
+            name: value.copy() if isinstance(value, dict | list | set) else value
+            for name, value in vars(self.model).items()
+        }
+        try:
+            with self.applying(record):
+                yield
+        except BaseException:
+            vars(self.model).clear()
+            vars(self.model).update(saved)
+            raise
 
     def ingest(
         self,
         detections: DetectionInput | Iterable[DetectionInput],
         sensor: Mapping[str, Any] | None = None,
     ) -> IngestResult:
-        """:meth:`WorldModel.ingest`, journaled (nothing is journaled when it raises)."""
+        """:meth:`WorldModel.ingest`, journaled (nothing is journaled when it raises, and
+        the model is unchanged when the write fails: :class:`WriteFailed`)."""
         batch = [d.to_dict() if isinstance(d, Detection) else dict(d) for d in as_batch(detections)]
-        with self.applying(batch_record(batch, sensor)):
+        with self._undoable(batch_record(batch, sensor)):
             return self.model.ingest(batch, sensor=sensor)
 
     def act(self, action: Mapping[str, Any]) -> list[int]:
         """:meth:`WorldModel.act` (paper 004: a kick), journaled."""
-        with self.applying(action_record(action)):
+        with self._undoable(action_record(action)):
             return self.model.act(action)
 
     def reset(self) -> None:
-        with self.applying(reset_record()):
+        with self._undoable(reset_record()):
             self.model.reset()
 
     def replace_knowledge(self, knowledge: Knowledge) -> None:
-        with self.applying(knowledge_record(knowledge)):
+        with self._undoable(knowledge_record(knowledge)):
             self.model.replace_knowledge(knowledge)
 
     # -- maintenance -----------------------------------------------------------------------
@@ -235,6 +299,8 @@ class DurableWorld:
                 "archives": len(self.journal.archives()),
                 "bytes": self.journal.size_bytes(),
                 "recovery": self.recovery.to_dict(),
+                "write_failures": self.write_failures,
+                "write_error": self.write_error,
             }
 
     def close(self) -> None:

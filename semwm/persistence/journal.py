@@ -17,12 +17,14 @@ since the last checkpoint).
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import gzip
 import json
 import os
 import sqlite3
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Literal
@@ -57,6 +59,40 @@ class StoreError(RuntimeError):
     """The data directory cannot be used as it is (the message says why and where)."""
 
 
+class WriteFailed(RuntimeError):
+    """A write to the store failed and nothing of it was kept (the transaction was rolled
+    back). ``full``: the disk (or the file system's quota) is full; writes can succeed
+    again once space returns."""
+
+    def __init__(self, message: str, *, full: bool) -> None:
+        super().__init__(message)
+        self.full = full
+
+
+SQLITE_FULL = 13
+"""SQLite's result code for "database or disk is full"."""
+
+Fault = Callable[[str], None]
+"""A test's fault hook: called with the step about to run (``"append"``,
+``"snapshot"``, ``"commit"``; ``"probe"`` in ``DurableWorld.writable``); raising
+there is what the step would raise (for example SQLite's "database or disk is full")."""
+
+
+def is_full(error: BaseException) -> bool:
+    """Whether ``error`` says the disk is full (SQLite's SQLITE_FULL, or ENOSPC/EDQUOT)."""
+    if isinstance(error, sqlite3.Error):
+        code = getattr(error, "sqlite_errorcode", None)
+        return (code is not None and code & 0xFF == SQLITE_FULL) or "full" in str(error)
+    return isinstance(error, OSError) and error.errno in (errno.ENOSPC, errno.EDQUOT)
+
+
+def write_failed(path: Path, error: BaseException) -> WriteFailed:
+    """``error`` of a write to ``path`` as :class:`WriteFailed`."""
+    full = is_full(error)
+    what = "the disk is full" if full else "the write failed"
+    return WriteFailed(f"{path}: {what} ({error}); nothing of the change was stored", full=full)
+
+
 class Journal:
     """The SQLite store of a data directory.
 
@@ -86,6 +122,7 @@ class Journal:
                 f"{self.path}: store format {found}; this code reads format {STORE_FORMAT}"
             )
         self._in_transaction = False
+        self.fault: Fault | None = None
 
     # -- meta ------------------------------------------------------------------------------
     def meta(self, key: str) -> str | None:
@@ -98,22 +135,44 @@ class Journal:
     # -- appending -------------------------------------------------------------------------
     @contextmanager
     def transaction(self) -> Iterator[None]:
-        """Everything inside is committed together, or rolled back on an exception."""
-        self._db.execute("BEGIN IMMEDIATE")
+        """Everything inside is committed together, or rolled back on an exception.
+
+        A store error (a full disk, an I/O error) in the body or at the commit rolls
+        everything back and raises :class:`WriteFailed`: the transaction is over either
+        way, so the next one can start (a failed ``COMMIT`` used to leave it open).
+        """
+        try:
+            self._db.execute("BEGIN IMMEDIATE")
+        except (sqlite3.Error, OSError) as error:
+            raise write_failed(self.path, error) from error
         self._in_transaction = True
         try:
-            yield
-        except BaseException:
-            self._db.execute("ROLLBACK")
-            raise
-        else:
-            self._db.execute("COMMIT")
+            try:
+                yield
+                self._fault("commit")
+                self._db.execute("COMMIT")
+            except BaseException as error:
+                self._rollback()
+                if isinstance(error, sqlite3.Error | OSError):
+                    raise write_failed(self.path, error) from error
+                raise
         finally:
             self._in_transaction = False
+
+    def _rollback(self) -> None:
+        if self._db.in_transaction:
+            # SQLite may have rolled back itself (a failed COMMIT can)
+            with contextlib.suppress(sqlite3.Error):
+                self._db.execute("ROLLBACK")
+
+    def _fault(self, step: str) -> None:
+        if self.fault is not None:
+            self.fault(step)
 
     def append(self, record: Record) -> int:
         """Store ``record`` after the last one; returns its ``seq``."""
         text = record.payload_json()
+        self._fault("append")
         seq = self.last_seq() + 1
         self._db.execute(
             "INSERT INTO journal (seq, kind, wall_time, payload, crc) VALUES (?, ?, ?, ?, ?)",
@@ -160,6 +219,7 @@ class Journal:
     # -- snapshots -------------------------------------------------------------------------
     def save_snapshot(self, snapshot: Snapshot, keep: int = 2) -> None:
         """Store ``snapshot``; only the ``keep`` newest stay."""
+        self._fault("snapshot")
         self._db.execute(
             "INSERT OR REPLACE INTO snapshots VALUES (?, ?, ?, ?, ?, ?)",
             (
