@@ -39,11 +39,14 @@ def attach_persistence(app: FastAPI, settings: Settings) -> Iterator[None]:
                 sync=settings.sync,
                 snapshot_every=settings.snapshot_every,
                 compact_every=settings.compact_every,
+                on_damage=settings.on_damage,
             )
             stack.callback(durable.close)
             service.use_model(durable.model)
             service.hooks.append(durable)
             service.storage_probe = durable.writable
+            if durable.recovery.damaged:
+                service.store_damage = (list(durable.recovery.damage), durable.recovery.lost)
             app.state.durable = durable
             logger.info("data dir %s: %s", settings.data_dir, durable.recovery.to_dict())
         if service is not None and settings.record is not None:

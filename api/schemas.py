@@ -374,6 +374,14 @@ class HealthOut(BaseModel):
     commit: int | None = Field(
         default=None, description="Readers only: the number of the last accepted change."
     )
+    store_damage: list[str] | None = Field(
+        default=None,
+        description="Readers only, with --data-dir: the damage the last start found in the "
+        "store (docs/persistence.md, 'Damage'); null when none.",
+    )
+    lost_records: list[int] | None = Field(
+        default=None, description="Readers only: [first, last] seq of the records lost."
+    )
 
 
 class ReadyOut(BaseModel):

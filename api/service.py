@@ -250,6 +250,9 @@ class WorldService:
         self._storage_problem: str | None = None  # the store refused the last write
         self.storage_probe: Callable[[], bool] | None = None  # can the store write again?
         self.retry_after = 5  # s: Retry-After of a write the store refused
+        self.storage_refusals = 0
+        # the damage the data directory's last start found: problems, [first, last] lost
+        self.store_damage: tuple[list[str], list[int] | None] | None = None
 
     def use_model(self, model: WorldModel) -> None:
         """Serve ``model`` from now on (the one a data directory restored)."""
@@ -283,6 +286,7 @@ class WorldService:
         except WriteFailed as error:
             what = "the data directory's disk is full" if error.full else "the store failed"
             self._storage_problem = f"{what}: writes are refused ({error})"
+            self.storage_refusals += 1
             raise StorageUnavailable(
                 f"{what}: the change was not applied and nothing of it was stored ({error}); "
                 f"reads are served; retry after {self.retry_after} s",
@@ -676,10 +680,13 @@ class WorldService:
 
     def health(self) -> dict[str, Any]:
         """A summary of the world as of the last commit; never waits for the lock."""
+        damage = self.store_damage
         return {
             "status": "ok",
             "knowledge": str(self.knowledge_path) if self.knowledge_path else None,
             **self._summary,
+            "store_damage": damage[0] if damage else None,
+            "lost_records": damage[1] if damage else None,
         }
 
     def stats(self) -> dict[str, Any]:

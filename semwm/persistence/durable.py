@@ -26,11 +26,11 @@ from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, Literal
 
 from semwm.detection import Detection
 from semwm.knowledge.model import Knowledge
-from semwm.persistence.journal import Journal, StoreError, SyncPolicy, WriteFailed
+from semwm.persistence.journal import Damage, Journal, StoreError, SyncPolicy, WriteFailed
 from semwm.persistence.records import (
     DamagedRecord,
     Record,
@@ -49,6 +49,9 @@ from semwm.world import IngestResult, WorldModel
 
 logger = logging.getLogger("semwm.persistence")
 
+OnDamage = Literal["refuse", "truncate"]
+ON_DAMAGE: tuple[str, ...] = ("refuse", "truncate")
+
 
 @dataclass
 class Recovery:
@@ -61,9 +64,25 @@ class Recovery:
     cut: str | None = None
     cut_records: int = 0
     knowledge_changed: bool = False
+    damage: list[str] = field(default_factory=list)
+    lost: list[int] | None = None  # [first, last] seq of records known lost
+
+    @property
+    def damaged(self) -> bool:
+        return bool(self.damage) or self.cut is not None
 
     def to_dict(self) -> dict[str, Any]:
-        return dict(vars(self))
+        return {**vars(self), "damage": list(self.damage)}
+
+    def note(self, damage: Damage) -> None:
+        for problem in damage.problems:
+            logger.error("%s", problem)
+        self.damage.extend(damage.problems)
+        if damage.lost is not None:
+            first, last = damage.lost
+            if self.lost is not None:
+                first, last = min(first, self.lost[0]), max(last, self.lost[1])
+            self.lost = [first, last]
 
 
 class DurableWorld:
@@ -106,6 +125,7 @@ class DurableWorld:
         sync: SyncPolicy = "always",
         snapshot_every: int = 1000,
         compact_every: int = 100_000,
+        on_damage: OnDamage = "truncate",
     ) -> DurableWorld:
         """Open (or create) ``data_dir``.
 
@@ -113,21 +133,36 @@ class DurableWorld:
         as it was (held scans too: the journal replays the same ingests); then, if
         ``knowledge`` (or ``reorder_window`` or ``hold``) differs from the
         restored one, it is applied as a journaled change, like a reload.
+
+        The store's integrity is checked first (:meth:`Journal.check`: SQLite's
+        quick_check, sequence gaps, records the head file says were committed and are
+        missing) and every record replayed is checked against its CRC. Damage is
+        logged at ERROR and reported in :attr:`recovery` (``damage``, ``lost``);
+        ``on_damage`` ``"refuse"`` raises :class:`StoreError` naming it instead of
+        starting, ``"truncate"`` starts from what is intact (records after a damaged
+        one are cut). A store that held records is never reported ``new``.
         """
         if snapshot_every < 1 or compact_every < 1:
             raise ValueError("snapshot_every and compact_every must be at least 1")
+        if on_damage not in ON_DAMAGE:
+            raise ValueError(f"on_damage must be one of {', '.join(ON_DAMAGE)}; got {on_damage!r}")
         journal = Journal(Path(data_dir), sync)
         recovery = Recovery()
         try:
-            model = _restore(journal, recovery)
+            recovery.note(journal.check())
+            if recovery.damage and on_damage == "refuse":
+                raise StoreError(_refusal(journal, recovery))
+            model = _restore(journal, recovery, on_damage)
             if model is None and knowledge is None:
                 raise StoreError(f"{journal.path}: a new data directory needs knowledge")
         except BaseException:
             journal.close()
             raise
+        if recovery.damaged:
+            journal.write_head(journal.last_seq())  # what is left is the journal now
         if model is None:
             assert knowledge is not None
-            recovery.new = True
+            recovery.new = not journal.existed and not recovery.damaged
             model = WorldModel(knowledge, reorder_window=reorder_window, hold=hold)
             with journal.transaction():
                 journal.append(config_record(reorder_window, hold))
@@ -308,7 +343,20 @@ class DurableWorld:
             self.journal.close()
 
 
-def _restore(journal: Journal, recovery: Recovery) -> WorldModel | None:
+def _refusal(journal: Journal, recovery: Recovery) -> str:
+    lost = (
+        f"records {recovery.lost[0]} to {recovery.lost[1]} are lost; "
+        if recovery.lost is not None
+        else ""
+    )
+    return (
+        f"{journal.data_dir}: the store is damaged: {'; '.join(recovery.damage)}. "
+        f"{lost}nothing was changed. Keep a copy of the directory, then start with "
+        "--on-damage truncate to serve what is intact (docs/persistence.md, 'Damage')"
+    )
+
+
+def _restore(journal: Journal, recovery: Recovery, on_damage: OnDamage) -> WorldModel | None:
     """The world of the stored journal (``None`` for an empty store)."""
     replayer: Replayer | None = None
     for snapshot in journal.snapshots():
@@ -337,11 +385,13 @@ def _restore(journal: Journal, recovery: Recovery) -> WorldModel | None:
                 f"{journal.path}: the journal starts at record {first}, no archive holds the "
                 "records before it and no snapshot is readable by this code: cannot rebuild"
             )
-    _replay_tail(journal, replayer, recovery)
+    _replay_tail(journal, replayer, recovery, on_damage)
     return replayer.model
 
 
-def _replay_tail(journal: Journal, replayer: Replayer, recovery: Recovery) -> None:
+def _replay_tail(
+    journal: Journal, replayer: Replayer, recovery: Recovery, on_damage: OnDamage
+) -> None:
     start = replayer.last_seq
     records = journal.records(after=start)
     while True:
@@ -350,19 +400,25 @@ def _replay_tail(journal: Journal, replayer: Replayer, recovery: Recovery) -> No
         except StopIteration:
             return
         except DamagedRecord as error:
-            _cut(journal, error.seq, str(error), recovery)
+            _cut(journal, error.seq, str(error), recovery, on_damage)
             return
         try:
             replayer.apply(record)
         except RecordError as error:
-            _cut(journal, record.seq, str(error), recovery)
+            _cut(journal, record.seq, str(error), recovery, on_damage)
             return
         recovery.replayed += 1
 
 
-def _cut(journal: Journal, seq: int, problem: str, recovery: Recovery) -> None:
+def _cut(journal: Journal, seq: int, problem: str, recovery: Recovery, on_damage: OnDamage) -> None:
+    last = journal.last_seq()
+    if on_damage == "refuse":
+        recovery.note(Damage([problem], (seq, last)))
+        raise StoreError(_refusal(journal, recovery))
     with journal.transaction():
         count = journal.cut(seq)
     recovery.cut = problem
     recovery.cut_records = count
-    logger.error("%s; the journal was cut at record %d (%d record(s) dropped)", problem, seq, count)
+    recovery.note(
+        Damage([f"{problem}; the journal was cut at record {seq} ({count} dropped)"], (seq, last))
+    )
