@@ -82,7 +82,8 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
 
 
 PERSISTENCE_OPTIONS = (
-    "data_dir", "sync", "snapshot_every", "compact_every", "on_damage", "record",
+    "data_dir", "sync", "snapshot_every", "compact_every", "on_damage", "knowledge_from",
+    "record",
 )  # fmt: skip
 
 
@@ -109,6 +110,13 @@ def add_persistence_options(parser: argparse.ArgumentParser) -> None:
         choices=["refuse", "truncate"],
         help="a data dir found damaged on start: refuse to start (default), or truncate "
         "to what is intact and serve it (the loss is on /health and /metrics)",
+    )
+    group.add_argument(
+        "--knowledge-from",
+        choices=["file", "journal"],
+        help="the journal's knowledge (live edits) differs from --knowledge: apply the "
+        "file, or keep the journal's (default: refuse to start, unless --write-back, "
+        "which keeps the journal's and writes it to the file)",
     )
     group.add_argument(
         "--record", type=Path, help="record changes and published worlds to FILE.mcap"

@@ -8,7 +8,7 @@
 * :mod:`semwm.persistence.mcap_io` — MCAP recordings (``pip install "semwm[mcap]"``).
 """
 
-from semwm.persistence.durable import DurableWorld, Recovery
+from semwm.persistence.durable import DurableWorld, KnowledgeConflict, Recovery
 from semwm.persistence.journal import SYNC_POLICIES, Journal, StoreError, SyncPolicy, WriteFailed
 from semwm.persistence.records import (
     Record,
@@ -25,6 +25,7 @@ __all__ = [
     "SYNC_POLICIES",
     "DurableWorld",
     "Journal",
+    "KnowledgeConflict",
     "Record",
     "RecordError",
     "Recovery",

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import IO, Any, Literal
 
 from semwm.detection import Detection
-from semwm.knowledge.model import Knowledge
+from semwm.knowledge.model import Knowledge, KnowledgeDocument
 from semwm.persistence.journal import Damage, Journal, StoreError, SyncPolicy, WriteFailed
 from semwm.persistence.records import (
     DamagedRecord,
@@ -50,6 +50,44 @@ from semwm.world import IngestResult, WorldModel
 logger = logging.getLogger("semwm.persistence")
 
 OnDamage = Literal["refuse", "truncate"]
+KnowledgeFrom = Literal["file", "journal", "refuse"]
+
+
+class KnowledgeConflict(StoreError):
+    """The knowledge given conflicts with the journal's; the message names the classes
+    and the ways out."""
+
+
+def knowledge_difference(journal: KnowledgeDocument, given: KnowledgeDocument) -> str:
+    """What differs between the journal's knowledge and the given one, in words."""
+    ours = {c.name: c for c in journal.classes}
+    theirs = {c.name: c for c in given.classes}
+    parts = []
+    added = sorted(set(ours) - set(theirs))
+    removed = sorted(set(theirs) - set(ours))
+    changed = sorted(n for n in set(ours) & set(theirs) if ours[n] != theirs[n])
+    if added:
+        parts.append(f"classes only in the journal: {', '.join(added)}")
+    if removed:
+        parts.append(f"classes only in the file: {', '.join(removed)}")
+    if changed:
+        parts.append(f"classes that differ: {', '.join(changed)}")
+    for name in ("world", "detectors", "known_objects"):
+        if getattr(journal, name) != getattr(given, name):
+            parts.append(f"{name} differ")
+    return "; ".join(parts) or "the documents differ"
+
+
+def classes_held(model: WorldModel, knowledge: Knowledge) -> set[str]:
+    """Classes of tracked objects (in any stored hypothesis) that ``knowledge`` lacks."""
+    return {
+        obj.cls
+        for hypothesis in model.hypotheses(max(1, model.hypothesis_count))
+        for obj in hypothesis.objects
+        if obj.cls not in knowledge.classes
+    }
+
+
 ON_DAMAGE: tuple[str, ...] = ("refuse", "truncate")
 
 
@@ -126,6 +164,7 @@ class DurableWorld:
         snapshot_every: int = 1000,
         compact_every: int = 100_000,
         on_damage: OnDamage = "truncate",
+        knowledge_from: KnowledgeFrom = "file",
     ) -> DurableWorld:
         """Open (or create) ``data_dir``.
 
@@ -174,12 +213,47 @@ class DurableWorld:
                 model.reorder_window = reorder_window
                 model.set_hold(hold)
         if knowledge is not None and knowledge.document != model.knowledge.document:
-            recovery.knowledge_changed = True
-            logger.warning(
-                "%s: the knowledge given differs from the journal's; applying it", journal.path
-            )
-            world.replace_knowledge(knowledge)
+            try:
+                world._knowledge_given(knowledge, knowledge_from)
+            except BaseException:
+                world.close()
+                raise
         return world
+
+    def _knowledge_given(self, knowledge: Knowledge, knowledge_from: KnowledgeFrom) -> None:
+        """``knowledge`` (the file's) differs from the journal's: use one of them."""
+        journal = self.model.knowledge
+        if knowledge_from == "journal":
+            logger.warning(
+                "%s: the knowledge file differs from the journal's (%s); the journal's is in force",
+                self.journal.path,
+                knowledge_difference(journal.document, knowledge.document),
+            )
+            return
+        if knowledge_from == "refuse":
+            raise KnowledgeConflict(
+                f"{self.journal.data_dir}: the knowledge file {knowledge.source or ''} differs "
+                f"from the knowledge in force in the journal (live edits since it was read: "
+                f"{knowledge_difference(journal.document, knowledge.document)}). Nothing was "
+                "changed. Start with --write-back to keep the journal's knowledge and write it "
+                "to the file, or with --knowledge-from file to apply the file (as POST "
+                "/knowledge/reload would: objects of classes it lacks refuse it)"
+            )
+        held = classes_held(self.model, knowledge)
+        if held:
+            raise KnowledgeConflict(
+                f"{self.journal.data_dir}: the knowledge file {knowledge.source or ''} removes "
+                f"classes that tracked objects hold: {', '.join(sorted(held))}; nothing was "
+                "changed. Keep these classes in the file, or start with --write-back to keep "
+                "the journal's knowledge"
+            )
+        self.recovery.knowledge_changed = True
+        logger.warning(
+            "%s: the knowledge file differs from the journal's (%s); applying it",
+            self.journal.path,
+            knowledge_difference(journal.document, knowledge.document),
+        )
+        self.replace_knowledge(knowledge)
 
     # -- changes ---------------------------------------------------------------------------
     @contextmanager
