@@ -26,6 +26,7 @@ class ApiError(Exception):
     """A request refused with ``status`` and a message."""
 
     status = 400
+    headers: dict[str, str] | None = None  # response headers (Retry-After...)
 
     def __init__(self, message: str) -> None:
         super().__init__(message)
@@ -45,6 +46,17 @@ class ConflictError(ApiError):
     """409: the request is well formed but conflicts with the state (e.g. too old)."""
 
     status = 409
+
+
+class StorageUnavailable(ApiError):
+    """507 (the disk is full) or 503 (another store failure) with ``Retry-After``: the
+    change was neither stored nor applied; reads are served and writes go through
+    again once the store can take them."""
+
+    def __init__(self, message: str, *, full: bool, retry_after: int) -> None:
+        super().__init__(message)
+        self.status = 507 if full else 503
+        self.headers = {"Retry-After": str(retry_after)}
 
 
 class InvalidError(ApiError):
@@ -89,13 +101,25 @@ def json_safe(value: Any) -> Any:
     """
     if isinstance(value, float):
         return value if math.isfinite(value) else str(value)
-    if value is None or isinstance(value, str | int | bool):
+    if isinstance(value, str):
+        return _utf8_safe(value)
+    if value is None or isinstance(value, int | bool):
         return value
     if isinstance(value, dict):
-        return {str(k): json_safe(v) for k, v in value.items()}
+        return {_utf8_safe(str(k)): json_safe(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
         return [json_safe(v) for v in value]
-    return str(value)
+    return _utf8_safe(str(value))
+
+
+def _utf8_safe(text: str) -> str:
+    """``text``, with a lone surrogate (``"\\ud800"``, which JSON parsers accept but UTF-8
+    cannot encode) written as its escape: echoed in a 422, it must not make it a 500."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+    return text
 
 
 def validation_items(errors: Sequence[Any], prefix: Loc = ()) -> list[dict[str, Any]]:
@@ -104,7 +128,7 @@ def validation_items(errors: Sequence[Any], prefix: Loc = ()) -> list[dict[str, 
     for error in errors:
         item: dict[str, Any] = {
             "loc": [*prefix, *error.get("loc", ())],
-            "msg": str(error.get("msg", "")),
+            "msg": _utf8_safe(str(error.get("msg", ""))),
             "type": str(error.get("type", "value_error")),
         }
         if "input" in error:
@@ -127,7 +151,7 @@ def install_error_handlers(app: FastAPI) -> None:
 
     async def on_api_error(request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, ApiError)
-        return JSONResponse(status_code=exc.status, content=exc.body())
+        return JSONResponse(status_code=exc.status, content=exc.body(), headers=exc.headers)
 
     async def on_validation_error(request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, RequestValidationError)

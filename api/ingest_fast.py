@@ -86,7 +86,9 @@ class FastIngest:
         try:
             committed = await self._apply(self.service(), raw, key)
         except ApiError as refusal:  # nothing was applied: the route's error answer
-            answer = JSONResponse(status_code=refusal.status, content=refusal.body())
+            answer = JSONResponse(
+                status_code=refusal.status, content=refusal.body(), headers=refusal.headers
+            )
             await answer(scope, receive, send)
             return
         result = committed.value

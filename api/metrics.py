@@ -92,6 +92,16 @@ class WorldCollector(Collector):
              stats["knowledge_version"]),
             ("stream_subscribers", "Open GET /world/stream connections", self._subscribers()),
         ]  # fmt: skip
+        damage = service.store_damage
+        lost = damage[1] if damage else None
+        gauges += [
+            ("store_damaged", "1 when the data directory's last start found damage "
+             "(docs/persistence.md)", 1 if damage else 0),
+            ("store_lost_records", "Records the last start found lost",
+             0 if lost is None else lost[1] - lost[0] + 1),
+            ("store_write_refusals", "Writes refused since start because the store could "
+             "not write (a full disk)", service.storage_refusals),
+        ]  # fmt: skip
         if stats["time"] is not None:
             gauges.append(("world_time_seconds", "Latest accepted detection time", stats["time"]))
         for name, documentation, value in gauges:

@@ -18,6 +18,7 @@ from fastapi import FastAPI
 
 from api.service import WorldService
 from api.settings import Settings
+from semwm.knowledge.model import Knowledge
 
 logger = logging.getLogger("api")
 
@@ -39,10 +40,17 @@ def attach_persistence(app: FastAPI, settings: Settings) -> Iterator[None]:
                 sync=settings.sync,
                 snapshot_every=settings.snapshot_every,
                 compact_every=settings.compact_every,
+                on_damage=settings.on_damage,
+                knowledge_from=settings.knowledge_from
+                or ("journal" if settings.write_back else "refuse"),
             )
             stack.callback(durable.close)
             service.use_model(durable.model)
+            _write_back_journal_knowledge(service, durable.model.knowledge, settings)
             service.hooks.append(durable)
+            service.storage_probe = durable.writable
+            if durable.recovery.damaged:
+                service.store_damage = (list(durable.recovery.damage), durable.recovery.lost)
             app.state.durable = durable
             logger.info("data dir %s: %s", settings.data_dir, durable.recovery.to_dict())
         if service is not None and settings.record is not None:
@@ -54,6 +62,25 @@ def attach_persistence(app: FastAPI, settings: Settings) -> Iterator[None]:
             service.hooks.append(recorder)
             logger.info("recording to %s", settings.record)
         yield
+
+
+def _write_back_journal_knowledge(
+    service: WorldService, knowledge: Knowledge, settings: Settings
+) -> None:
+    """With ``--write-back``, the journal's knowledge in force is written to the file
+    when it differs (live edits the file had not seen)."""
+    path = service.knowledge_path
+    if not settings.write_back or path is None or settings.knowledge_from == "file":
+        return
+    from semwm.knowledge.loader import dump_document, load_document
+
+    try:
+        same = load_document(path) == knowledge.document
+    except Exception:  # unreadable: written anew
+        same = False
+    if not same:
+        dump_document(knowledge.document, path)
+        logger.warning("%s: written from the journal's knowledge (--write-back)", path)
 
 
 def persistence_status(app: FastAPI) -> dict[str, Any] | None:

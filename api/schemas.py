@@ -14,7 +14,7 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, TypeAdapter
 from typing_extensions import TypedDict  # pydantic needs it before Python 3.12
 
-from semwm.detection import MAX_TIME_STD
+from semwm.detection import MAX_TIME, MAX_TIME_STD
 from semwm.knowledge import ClassSpec, ResolvedClass
 from semwm.world import IngestResult
 
@@ -26,6 +26,8 @@ VARIANCE_RANGE = (1e-12, 1e6)
 """m^2: the range of a covariance's eigenvalues (1 micrometre to 1 km standard deviation)."""
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+Time = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_TIME, le=MAX_TIME)]
+"""s: within ±MAX_TIME, the same bound in the past and in the future."""
 Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Vector = Annotated[list[Coordinate], Field(min_length=2, max_length=3)]
 Name = Annotated[str, Field(min_length=1, max_length=MAX_NAME)]
@@ -90,7 +92,7 @@ class DetectionIn(Body):
 
     model_config = ConfigDict(json_schema_extra={"examples": [DETECTION_EXAMPLE]})
 
-    time: Finite = Field(description="When the object was seen (s).")
+    time: Time = Field(description="When the object was seen (s).")
     cls: Name = Field(alias="class", description="The detected class, e.g. 'Cup'.")
     position: Vector = Field(description="Measured position (m): [x, y] or [x, y, z].")
     covariance: Covariance | None = Field(
@@ -122,12 +124,12 @@ class SensorIn(Body):
     that the scan does not report lose existence and confidence. With it a batch may
     be empty: "I looked and saw nothing"."""
 
-    pose: list[float] = Field(description="[x, y, heading] (m, m, rad), or [x, y, z, heading]")
-    time: float | None = Field(
-        default=None, allow_inf_nan=False, description="s; default: the detections' time"
+    pose: Annotated[list[Coordinate], Field(min_length=3, max_length=4)] = Field(
+        description="[x, y, heading] (m, m, rad), or [x, y, z, heading]"
     )
-    source: str | None = Field(default=None, description="default: the detections' source")
-    detector: str | None = Field(default=None, description="default: the detections' detector")
+    time: Time | None = Field(default=None, description="s; default: the detections' time")
+    source: Name | None = Field(default=None, description="default: the detections' source")
+    detector: Name | None = Field(default=None, description="default: the detections' detector")
     looking_at: list[int] = Field(
         default_factory=list, description="ids of objects the robot is looking at"
     )
@@ -178,7 +180,7 @@ _FAST = ConfigDict(extra="forbid", strict=True)
 DetectionDict = TypedDict(
     "DetectionDict",
     {
-        "time": Finite,
+        "time": Time,
         "class": Name,
         "position": Vector,
         "covariance": NotRequired[Covariance | None],
@@ -390,6 +392,14 @@ class HealthOut(BaseModel):
     objects: int | None = Field(default=None, description="Readers only.")
     commit: int | None = Field(
         default=None, description="Readers only: the number of the last accepted change."
+    )
+    store_damage: list[str] | None = Field(
+        default=None,
+        description="Readers only, with --data-dir: the damage the last start found in the "
+        "store (docs/persistence.md, 'Damage'); null when none.",
+    )
+    lost_records: list[int] | None = Field(
+        default=None, description="Readers only: [first, last] seq of the records lost."
     )
 
 

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Generic, Literal, Protocol, TypeVar
 
+from pydantic import ValidationError
+
 from api.errors import (
     ApiError,
     ConflictError,
@@ -27,6 +29,8 @@ from api.errors import (
     KnowledgeFileError,
     Loc,
     NotFoundError,
+    StorageUnavailable,
+    validation_items,
 )
 from api.ordered_lock import TimeOrderedLock
 from semwm import IngestResult, WorldModel, load_knowledge
@@ -37,6 +41,7 @@ from semwm.detection import (
     DetectionError,
     DetectionProblem,
     OutOfOrderError,
+    SensorReport,
 )
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
 from semwm.persistence.records import (
@@ -133,6 +138,19 @@ def _save(model: WorldModel) -> dict[str, Any]:
 def _restore(model: WorldModel, saved: dict[str, Any]) -> None:
     vars(model).clear()
     vars(model).update(saved)
+
+
+def _save_object(obj: object) -> dict[str, Any]:
+    """An object's attributes, top-level containers copied (as :func:`_save`)."""
+    return {
+        name: value.copy() if isinstance(value, dict | list | set) else value
+        for name, value in vars(obj).items()
+    }
+
+
+def _restore_object(obj: object, saved: dict[str, Any]) -> None:
+    vars(obj).clear()
+    vars(obj).update(saved)
 
 
 def known_list(names: Sequence[str]) -> str:
@@ -233,6 +251,12 @@ class WorldService:
         self._sources_lock = threading.Lock()  # taken inside self._lock, never around it
         self.clock = clock
         self._locals: dict[str, LocalModel] = {}  # two levels: robots' local models
+        self._storage_problem: str | None = None  # the store refused the last write
+        self.storage_probe: Callable[[], bool] | None = None  # can the store write again?
+        self.retry_after = 5  # s: Retry-After of a write the store refused
+        self.storage_refusals = 0
+        # the damage the data directory's last start found: problems, [first, last] lost
+        self.store_damage: tuple[list[str], list[int] | None] | None = None
 
     def use_model(self, model: WorldModel) -> None:
         """Serve ``model`` from now on (the one a data directory restored)."""
@@ -247,11 +271,33 @@ class WorldService:
 
     @contextmanager
     def _hooked(self, record: Record) -> Iterator[None]:
-        """Apply a change inside every hook's ``applying`` (inside :meth:`_change`)."""
-        with ExitStack() as stack:
-            for hook in self.hooks:
-                stack.enter_context(hook.applying(record))
+        """Apply a change inside every hook's ``applying`` (inside :meth:`_change`).
+
+        A store that cannot write (:class:`~semwm.persistence.journal.WriteFailed`: a
+        full disk...) refuses the change: 507 or 503 with ``Retry-After``; nothing was
+        stored and :meth:`_change` undoes it in memory. ``/ready`` says so until the
+        store can write again (:attr:`storage_probe`) or a write succeeds."""
+        if not self.hooks:
             yield
+            return
+        from semwm.persistence.journal import WriteFailed
+
+        try:
+            with ExitStack() as stack:
+                for hook in self.hooks:
+                    stack.enter_context(hook.applying(record))
+                yield
+        except WriteFailed as error:
+            what = "the data directory's disk is full" if error.full else "the store failed"
+            self._storage_problem = f"{what}: writes are refused ({error})"
+            self.storage_refusals += 1
+            raise StorageUnavailable(
+                f"{what}: the change was not applied and nothing of it was stored ({error}); "
+                f"reads are served; retry after {self.retry_after} s",
+                full=error.full,
+                retry_after=self.retry_after,
+            ) from None
+        self._storage_problem = None
 
     # -- listeners ----------------------------------------------------------------------------
 
@@ -387,80 +433,90 @@ class WorldService:
         :class:`WorldBusy` (nothing applied) rather than wait for the world's lock.
         """
         with self._locked(self._scan_order(detections, sensor), wait):
-            if key is not None and key in self._recent:
-                self._recent.move_to_end(key)
-                earlier = self._recent[key]
-                return Committed(earlier.value, earlier.commit, replayed=True)
-            now = self.clock()
-            try:
-                with self._sources_lock:
-                    in_order = self._model.hold == 0
-                    placement = self.sources.place(
-                        list(detections),
-                        now,
-                        newest=self._model.processed_time if in_order else None,
-                        tolerance=self.order_tolerance,
-                        newest_source=self._model.processed_source if in_order else None,
-                    )
-                    if sensor is not None and sensor.get("time") is not None:
-                        owner = sensor.get("source", _first_source(detections))
-                        placed_time = self.sources.to_service_time(owner, sensor["time"])
-                        if isinstance(placed_time, int | float) and not isinstance(
-                            placed_time, bool
-                        ):
-                            placed_time = placement.moved.get(
-                                (owner or None, float(placed_time)), placed_time
-                            )
-                        sensor = {**sensor, "time": placed_time}
-            except TimeGuardError as error:
-                raise InvalidError(_time_items(error, batch)) from error
-            placed = [
-                d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
-            ]
-            started = time.perf_counter()
-            with self._change():
-                self._check_sources(placed, batch)
-                try:
-                    with self._hooked(batch_record(placed, sensor)):
-                        result = self._model.ingest(placed, sensor=sensor)
-                except DetectionError as error:
-                    raise InvalidError(problems_to_items(error.problems, batch)) from error
-                except OutOfOrderError as error:
-                    message = f"{error}; nothing was applied"
-                    with self._sources_lock:
-                        self.sources.late(placement, message)
-                    unsynced = sorted(
-                        str(s) for s in placement.counts if s is not None and not self._synced(s)
-                    )
-                    hint = (
-                        f" (unsynced source(s) {', '.join(unsynced)}: sync their clocks with "
-                        "POST /sources/NAME/sync, see GET /sources)"
-                        if unsynced
-                        else ""
-                    )
-                    raise ConflictError(message + hint) from error
+            return self._ingest_locked(detections, batch, key, sensor)
+
+    def _ingest_locked(
+        self,
+        detections: Sequence[dict[str, Any]],
+        batch: bool,
+        key: str | None = None,
+        sensor: dict[str, Any] | None = None,
+    ) -> Committed[IngestResult]:
+        """:meth:`ingest` with the world's lock held."""
+        if key is not None and key in self._recent:
+            self._recent.move_to_end(key)
+            earlier = self._recent[key]
+            return Committed(earlier.value, earlier.commit, replayed=True)
+        now = self.clock()
+        try:
             with self._sources_lock:
-                self.sources.accepted(placement, now)
-            self._warn_ignored(result.ignored_detections)
-            self.arrival_order_scans += len(placement.moved)
-            if self._listeners:
-                self._notify(
-                    WorldChange(
-                        "detections",
-                        tuple(placed),
-                        applied=result.applied,
-                        ignored=result.ignored,
-                        ignored_detections=result.ignored_detections,
-                        time=result.time,
-                        seconds=time.perf_counter() - started,
-                    )
+                in_order = self._model.hold == 0
+                placement = self.sources.place(
+                    list(detections),
+                    now,
+                    newest=self._model.processed_time if in_order else None,
+                    tolerance=self.order_tolerance,
+                    newest_source=self._model.processed_source if in_order else None,
                 )
-            committed = Committed(result, self._commit)
-            if key is not None and self.idempotency_keys > 0:
-                self._recent[key] = committed
-                while len(self._recent) > self.idempotency_keys:
-                    self._recent.popitem(last=False)
-            return committed
+                if sensor is not None and sensor.get("time") is not None:
+                    owner = sensor.get("source", _first_source(detections))
+                    placed_time = self.sources.to_service_time(owner, sensor["time"])
+                    if isinstance(placed_time, int | float) and not isinstance(placed_time, bool):
+                        placed_time = placement.moved.get(
+                            (owner or None, float(placed_time)), placed_time
+                        )
+                    sensor = {**sensor, "time": placed_time}
+        except TimeGuardError as error:
+            raise InvalidError(_time_items(error, batch)) from error
+        placed = [
+            d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
+        ]
+        if sensor is not None:
+            _check_sensor(sensor)  # before the journal writes it (issue 30)
+        started = time.perf_counter()
+        with self._change():
+            self._check_sources(placed, batch)
+            try:
+                with self._hooked(batch_record(placed, sensor)):
+                    result = self._model.ingest(placed, sensor=sensor)
+            except DetectionError as error:
+                raise InvalidError(problems_to_items(error.problems, batch)) from error
+            except OutOfOrderError as error:
+                message = f"{error}; nothing was applied"
+                with self._sources_lock:
+                    self.sources.late(placement, message)
+                unsynced = sorted(
+                    str(s) for s in placement.counts if s is not None and not self._synced(s)
+                )
+                hint = (
+                    f" (unsynced source(s) {', '.join(unsynced)}: sync their clocks with "
+                    "POST /sources/NAME/sync, see GET /sources)"
+                    if unsynced
+                    else ""
+                )
+                raise ConflictError(message + hint) from error
+        with self._sources_lock:
+            self.sources.accepted(placement, now)
+        self._warn_ignored(result.ignored_detections)
+        self.arrival_order_scans += len(placement.moved)
+        if self._listeners:
+            self._notify(
+                WorldChange(
+                    "detections",
+                    tuple(placed),
+                    applied=result.applied,
+                    ignored=result.ignored,
+                    ignored_detections=result.ignored_detections,
+                    time=result.time,
+                    seconds=time.perf_counter() - started,
+                )
+            )
+        committed = Committed(result, self._commit)
+        if key is not None and self.idempotency_keys > 0:
+            self._recent[key] = committed
+            while len(self._recent) > self.idempotency_keys:
+                self._recent.popitem(last=False)
+        return committed
 
     def _check_sources(self, detections: Sequence[dict[str, Any]], batch: bool) -> None:
         """Hold at most ``max_sources`` distinct sources (422 for a new one beyond)."""
@@ -483,25 +539,53 @@ class WorldService:
     def local_ingest(self, robot: str, detections: Sequence[dict[str, Any]], batch: bool) -> int:
         """Apply ``detections`` to robot ``robot``'s local model (its own clock), then send
         its report (objects updated since the last one) to the global model. Returns the
-        objects reported."""
+        objects reported.
+
+        All or nothing (issue 30): a refusal of the batch or of its report (422, 409)
+        leaves the local model as it was (a new robot keeps none) and the global one
+        unchanged. A new robot counts as a source: beyond ``max_sources`` it is refused
+        (422) and keeps nothing, so local models are bounded and go with a reset."""
         with self._locked():
             local = self._locals.get(robot)
             if local is None:
+                self._check_new_robot(robot)
                 local = LocalModel(robot, self._model.knowledge, detector=None)
+            saved_local, saved_model = _save_object(local), _save(local.model)
             try:
-                local.ingest(list(detections))
-            except DetectionError as error:
-                raise InvalidError(problems_to_items(error.problems, batch)) from error
-            except OutOfOrderError as error:
-                raise ConflictError(
-                    f"{error} (local model of {robot!r}); nothing was applied"
-                ) from error
+                try:
+                    local.ingest(list(detections))
+                except DetectionError as error:
+                    raise InvalidError(problems_to_items(error.problems, batch)) from error
+                except OutOfOrderError as error:
+                    raise ConflictError(
+                        f"{error} (local model of {robot!r}); nothing was applied"
+                    ) from error
+                report = local.report()
+                reported = 0
+                if report is not None:
+                    try:
+                        self._ingest_locked(list(report.detections), batch=True)
+                    except ConflictError as error:
+                        raise ConflictError(
+                            f"the report of robot {robot!r}'s local model: {error.message}"
+                        ) from error
+                    reported = len(report.detections)
+            except BaseException:
+                _restore(local.model, saved_model)
+                _restore_object(local, saved_local)
+                raise
             self._locals[robot] = local
-            report = local.report()
-        if report is None:
-            return 0
-        self.ingest(list(report.detections), batch=True)
-        return len(report.detections)
+            return reported
+
+    def _check_new_robot(self, robot: str) -> None:
+        """A robot without a local model may start one while the sources have room."""
+        sources = self._sources | set(self._locals)
+        if robot not in sources and len(sources) >= self.max_sources:
+            raise InvalidError.one(
+                ("path", "robot"),
+                f"the service holds at most {self.max_sources} distinct sources and local "
+                f"models and has {len(sources)}; a new robot is refused (reset to start again)",
+            )
 
     def local_world(self, robot: str, time: float | None = None) -> WorldState:
         with self._locked():
@@ -622,10 +706,13 @@ class WorldService:
 
     def health(self) -> dict[str, Any]:
         """A summary of the world as of the last commit; never waits for the lock."""
+        damage = self.store_damage
         return {
             "status": "ok",
             "knowledge": str(self.knowledge_path) if self.knowledge_path else None,
             **self._summary,
+            "store_damage": damage[0] if damage else None,
+            "lost_records": damage[1] if damage else None,
         }
 
     def stats(self) -> dict[str, Any]:
@@ -655,6 +742,13 @@ class WorldService:
             )
         if self._failure is not None:
             reasons.append(self._failure)
+        problem = self._storage_problem
+        if problem is not None:
+            probe = self.storage_probe
+            if probe is not None and probe():
+                self._storage_problem = None  # space returned: writes will go through
+            else:
+                reasons.append(problem)
         return reasons
 
     def act(self, action: dict[str, Any]) -> Committed[tuple[list[int], int]]:
@@ -830,6 +924,15 @@ def _knowledge_item(path: Sequence[str | int], message: str, index: int) -> dict
     else:
         loc = ["knowledge", *parts]
     return {"loc": loc, "msg": message, "type": "knowledge", "path": parts}
+
+
+def _check_sensor(sensor: Mapping[str, Any]) -> None:
+    """A sensor view's values (finite pose...), checked before anything journals them:
+    422 at ``["body", "sensor", ...]``."""
+    try:
+        SensorReport.model_validate(sensor)
+    except ValidationError as error:
+        raise InvalidError(validation_items(error.errors(), ("body", "sensor"))) from None
 
 
 def _first_source(detections: Sequence[dict[str, Any] | Detection]) -> str | None:

@@ -68,6 +68,16 @@ class Settings(BaseSettings):
         with an fsync before answering, ``batch`` without (a power loss can lose
         the last commits); a snapshot every ``snapshot_every`` records; records
         beyond ``compact_every`` move to archives.
+    on_damage
+        A data directory found damaged on start (docs/persistence.md, "Damage"):
+        ``refuse`` to start (the default: the message says what was lost), or
+        ``truncate`` to serve what is intact (``/health`` shows what was lost).
+    knowledge_from
+        With a data directory whose journal's knowledge (live edits) differs from the
+        knowledge file: ``file`` applies the file (refused if tracked objects hold
+        classes it lacks), ``journal`` keeps the journal's. ``None`` (the default):
+        with ``write_back`` the journal's is kept and written to the file; without,
+        the service refuses to start and names the classes that differ.
     record
         Record every accepted change and published world to this MCAP file.
     token, token_file
@@ -131,6 +141,8 @@ class Settings(BaseSettings):
     sync: Literal["always", "batch"] = "always"
     snapshot_every: Annotated[int, Field(ge=1)] = 1000
     compact_every: Annotated[int, Field(ge=1)] = 100_000
+    on_damage: Literal["refuse", "truncate"] = "refuse"
+    knowledge_from: Literal["file", "journal"] | None = None
     record: Path | None = None
     max_ahead: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 10.0
     max_jump: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 60.0

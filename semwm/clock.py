@@ -32,6 +32,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+MAX_CLOCK = 1e12
+"""Largest absolute time of an exchange (s): :data:`semwm.detection.MAX_TIME`. Within it
+every delay, offset and their squares are finite (issue 30: ``1.797e308`` made the
+offset's uncertainty overflow, and every later status of the source failed)."""
+
 
 class ExchangeError(ValueError):
     """An exchange whose times cannot come from one round trip; ``field`` names the time."""
@@ -53,8 +58,13 @@ class Exchange:
 
     def __post_init__(self) -> None:
         for name in ("sent", "received", "replied", "returned"):
-            if not math.isfinite(getattr(self, name)):
-                raise ExchangeError(name, f"must be a finite number; got {getattr(self, name)}")
+            value = getattr(self, name)
+            if not math.isfinite(value):
+                raise ExchangeError(name, f"must be a finite number; got {value}")
+            if abs(value) > MAX_CLOCK:
+                raise ExchangeError(
+                    name, f"must lie within ±{MAX_CLOCK:g} s (a clock reading); got {value:g}"
+                )
         if self.replied < self.received:
             raise ExchangeError(
                 "replied",
@@ -155,7 +165,17 @@ class ClockEstimate:
         mean = math.fsum(e.offset for e in selected) / len(selected)
         spread = math.fsum((e.offset - mean) ** 2 for e in selected) / len(selected)
         mean_delay = math.fsum(e.delay for e in selected) / len(selected)
-        return math.sqrt(spread + mean_delay**2 / 12.0)
+        # hypot: sqrt(a² + b²) without overflow in the squares
+        return math.hypot(math.sqrt(spread), mean_delay / math.sqrt(12.0))
+
+    @property
+    def finite(self) -> bool:
+        """Whether the offset and its uncertainty are finite numbers (or not yet known)."""
+        try:
+            values = (self.offset, self.offset_std, self.delay)
+        except (ArithmeticError, ValueError):
+            return False
+        return all(v is None or math.isfinite(v) for v in values)
 
     def to_service(self, stamp: float) -> float:
         """A time on the source's clock placed on the service clock (unchanged if unsynced)."""

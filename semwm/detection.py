@@ -7,6 +7,11 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+MAX_TIME = 1e12
+"""Largest absolute time accepted (s), in the past as in the future: about 31,700 years
+either side of the epoch (a Unix time today is 1.8e9 s). Times and clock exchanges stay
+within it, so their differences, squares and sums are finite."""
+Time = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_TIME, le=MAX_TIME)]
 MAX_TIME_STD = 10.0
 """Largest ``time_std`` accepted (s): a stamp less certain than that is not a time."""
 
@@ -43,7 +48,7 @@ class Detection(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
 
-    time: Finite
+    time: Time
     cls: str = Field(alias="class", min_length=1)
     position: tuple[Finite, ...]
     covariance: tuple[tuple[Finite, ...], ...] | None = None
@@ -135,7 +140,7 @@ class SensorReport(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     pose: tuple[Finite, ...]
-    time: Finite | None = None
+    time: Time | None = None
     source: str | None = None
     detector: str | None = None
     looking_at: tuple[int, ...] = ()
@@ -164,7 +169,7 @@ class ActionReport(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
 
-    time: Finite
+    time: Time
     type: Literal["kick"] = "kick"
     source: str | None = None
     object: int | None = None

@@ -42,7 +42,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from semwm.clock import ClockEstimate, Exchange
+from semwm.clock import ClockEstimate, Exchange, ExchangeError
 from semwm.detection import MAX_TIME_STD, Detection
 
 DetectionLike = Detection | Mapping[str, Any]
@@ -216,18 +216,31 @@ class SourceRegistry:
         self._window, self._best = window, best
         self._records: dict[str | None, _Record] = {}
 
+    def _new_clock(self) -> ClockEstimate:
+        return ClockEstimate(self._window, self._best)
+
     def _record(self, name: str | None) -> _Record:
         record = self._records.get(name)
         if record is None:
-            record = self._records[name] = _Record(ClockEstimate(self._window, self._best))
+            record = self._records[name] = _Record(self._new_clock())
         return record
 
     # -- clocks ---------------------------------------------------------------------------------
 
     def sync(self, name: str, exchange: Exchange) -> SourceStatus:
-        """Add a finished exchange of source ``name``; its jump reference restarts."""
+        """Add a finished exchange of source ``name``; its jump reference restarts.
+
+        Raises :class:`~semwm.clock.ExchangeError` (nothing stored) when the estimate
+        with it would not be finite numbers."""
+        record = self._records.get(name)
+        clock = (record.clock if record is not None else self._new_clock()).add(exchange)
+        if not clock.finite:
+            raise ExchangeError(
+                "returned",
+                "the exchange makes the clock offset or its uncertainty overflow; not stored",
+            )
         record = self._record(name)
-        record.clock = record.clock.add(exchange)
+        record.clock = clock
         record.last_time = record.last_at = None
         record.problem = None
         return self._status(name, record)
@@ -452,12 +465,13 @@ class SourceRegistry:
 
     def _status(self, name: str | None, record: _Record) -> SourceStatus:
         clock = record.clock
+        finite = clock.finite  # a status is always reportable: a broken clock reads null
         return SourceStatus(
             name=name,
             synced=clock.synced,
-            clock_offset=clock.offset,
-            offset_std=clock.offset_std,
-            delay=clock.delay,
+            clock_offset=clock.offset if finite else None,
+            offset_std=clock.offset_std if finite else None,
+            delay=clock.delay if finite else None,
             exchanges=clock.count,
             detections=record.detections,
             last_time=record.last_time,

@@ -10,6 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from api.deps import WorldDep
 from api.schemas import MessageOut, ValidationErrorOut
 from api.service import COMMIT_HEADER
+from semwm.detection import MAX_TIME
 
 router = APIRouter(tags=["actions"])
 
@@ -41,7 +42,12 @@ class ActionIn(BaseModel):
         json_schema_extra={"examples": [_KICK]},
     )
 
-    time: float = Field(allow_inf_nan=False, description="s; not before the latest detection")
+    time: float = Field(
+        allow_inf_nan=False,
+        ge=-MAX_TIME,
+        le=MAX_TIME,
+        description="s; not before the latest detection",
+    )
     type: Literal["kick"] = "kick"
     source: str | None = Field(default=None, max_length=256)
     object: int | None = Field(default=None, description="the id of the object kicked")

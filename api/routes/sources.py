@@ -10,7 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from api.deps import WorldDep
 from api.errors import InvalidError
 from api.schemas import ValidationErrorOut
-from semwm.clock import Exchange, ExchangeError
+from semwm.clock import MAX_CLOCK, Exchange, ExchangeError
 from semwm.sources import SourceStatus
 
 router = APIRouter(tags=["sources"])
@@ -24,7 +24,9 @@ _EXAMPLES: dict[str, Any] = {
     },
 }  # fmt: skip
 
-Seconds = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+Seconds = Annotated[
+    float, Field(strict=True, allow_inf_nan=False, ge=-MAX_CLOCK, le=MAX_CLOCK)
+]  # bounded: the offset and its uncertainty stay finite (issue 30)
 _TIMES = ("received", "replied", "returned")
 
 

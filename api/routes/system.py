@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from fastapi import APIRouter, Request, Response
 from fastapi.responses import JSONResponse
 
@@ -19,12 +21,18 @@ def health(world: WorldDep, settings: SettingsDep, request: Request) -> HealthOu
 
     The summary (knowledge file, world time, hypothesis and object counts as of the
     last accepted change) is given to readers: everyone when reads are open, else
-    only with the read (or write) token.
+    only with the read (or write) token. The knowledge file's full path is given only
+    with a token; without one, its name.
     """
     secrets = [s.get_secret_value() for s in (settings.read_token, settings.token) if s]
-    if settings.read_token is not None and not token_matches(bearer(_headers(request)), secrets):
+    has_token = token_matches(bearer(_headers(request)), secrets)
+    if settings.read_token is not None and not has_token:
         return HealthOut(status="ok")
-    return HealthOut.model_validate(world.health())
+    summary = world.health()
+    if not has_token and summary["knowledge"] is not None:
+        # where the file lies tells a stranger about the host: its name only (issue 30)
+        summary["knowledge"] = Path(summary["knowledge"]).name
+    return HealthOut.model_validate(summary)
 
 
 @router.get(

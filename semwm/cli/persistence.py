@@ -182,7 +182,7 @@ def journal_command(args: argparse.Namespace) -> int:
         print(f"semwm journal: {data_dir}: not a data directory (no {DATABASE})", file=sys.stderr)
         return 2
     try:
-        world = DurableWorld.open(data_dir)
+        world = DurableWorld.open(data_dir, on_damage="refuse")  # a look changes nothing
     except StoreError as error:
         print(f"semwm journal: {error}", file=sys.stderr)
         return 2

@@ -81,7 +81,10 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
     return parser
 
 
-PERSISTENCE_OPTIONS = ("data_dir", "sync", "snapshot_every", "compact_every", "record")
+PERSISTENCE_OPTIONS = (
+    "data_dir", "sync", "snapshot_every", "compact_every", "on_damage", "knowledge_from",
+    "record",
+)  # fmt: skip
 
 
 def add_persistence_options(parser: argparse.ArgumentParser) -> None:
@@ -101,6 +104,19 @@ def add_persistence_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--snapshot-every", type=int, help="records between snapshots (1000)")
     group.add_argument(
         "--compact-every", type=int, help="records kept in the database before archiving (100000)"
+    )
+    group.add_argument(
+        "--on-damage",
+        choices=["refuse", "truncate"],
+        help="a data dir found damaged on start: refuse to start (default), or truncate "
+        "to what is intact and serve it (the loss is on /health and /metrics)",
+    )
+    group.add_argument(
+        "--knowledge-from",
+        choices=["file", "journal"],
+        help="the journal's knowledge (live edits) differs from --knowledge: apply the "
+        "file, or keep the journal's (default: refuse to start, unless --write-back, "
+        "which keeps the journal's and writes it to the file)",
     )
     group.add_argument(
         "--record", type=Path, help="record changes and published worlds to FILE.mcap"

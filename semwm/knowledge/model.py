@@ -30,6 +30,8 @@ MAX_RATE = 1e6
 MAX_HYPOTHESES = 1_000_000
 """The largest n_hyp,max."""
 
+Name = Annotated[str, Field(min_length=1)]
+"""A class or detector name: never empty (an empty name cannot be referred to)."""
 Entry = Annotated[float, Field(ge=-MAX_MAGNITUDE, le=MAX_MAGNITUDE, allow_inf_nan=False)]
 Matrix = tuple[tuple[Entry, ...], ...]
 """A matrix as a tuple of rows. Checked for shape and definiteness on resolution."""
@@ -322,8 +324,8 @@ class ClassSpec(Frozen):
         their detections are dropped.
     """
 
-    name: str
-    is_a: tuple[str, ...] = ()
+    name: Name
+    is_a: tuple[Name, ...] = ()
     detection_frequency: Rate | None = None
     new_frequency: Rate | None = None
     appearance: tuple[AppearanceRelation, ...] | None = None
@@ -374,7 +376,7 @@ class DetectorSpec(Frozen):
         updates (a teammate's relayed estimate: lower than one's own camera).
     """
 
-    name: str
+    name: Name
     clutter_frequency: Rate
     measurement_noise: Mapping[str, Matrix] = Field(default_factory=dict)
     range: Positive | None = None

@@ -26,6 +26,10 @@ Aliases are references: a few hundred bytes can name 10^9 values (an "alias bomb
 The largest shipped file has a few thousand; reading stops with a located problem
 beyond this.
 """
+MAX_DEPTH = 64
+"""The deepest nesting of mappings and lists a file may have. The shipped files nest at
+most 7 deep; a file nested 100,000 deep made the reader recurse past Python's limit
+(issue 30), so reading stops with a located problem beyond this."""
 ReadResult = tuple[dict[str, Any] | None, LineMap, list[Problem]]
 """Data for :class:`KnowledgeDocument` (``None`` when unreadable), line map, problems."""
 
@@ -45,7 +49,24 @@ def _too_many(node: yaml.Node) -> yaml.constructor.ConstructorError:
 
 
 class _LimitedLoader(yaml.SafeLoader):
-    """A safe loader whose ``<<`` merges stop at :data:`MAX_VALUES` entries."""
+    """A safe loader whose ``<<`` merges stop at :data:`MAX_VALUES` entries and whose
+    nodes nest at most :data:`MAX_DEPTH` deep."""
+
+    _depth = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise yaml.composer.ComposerError(
+                    None,
+                    None,
+                    f"mappings and lists nested deeper than {MAX_DEPTH} levels",
+                    self.peek_event().start_mark,  # type: ignore[no-untyped-call]
+                )
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
 
     def flatten_mapping(self, node: yaml.MappingNode) -> None:
         super().flatten_mapping(node)  # flattens merged sub-mappings through this method

@@ -8,8 +8,8 @@
 * :mod:`semwm.persistence.mcap_io` — MCAP recordings (``pip install "semwm[mcap]"``).
 """
 
-from semwm.persistence.durable import DurableWorld, Recovery
-from semwm.persistence.journal import SYNC_POLICIES, Journal, StoreError, SyncPolicy
+from semwm.persistence.durable import DurableWorld, KnowledgeConflict, Recovery
+from semwm.persistence.journal import SYNC_POLICIES, Journal, StoreError, SyncPolicy, WriteFailed
 from semwm.persistence.records import (
     Record,
     RecordError,
@@ -25,12 +25,14 @@ __all__ = [
     "SYNC_POLICIES",
     "DurableWorld",
     "Journal",
+    "KnowledgeConflict",
     "Record",
     "RecordError",
     "Recovery",
     "Replayer",
     "StoreError",
     "SyncPolicy",
+    "WriteFailed",
     "batch_record",
     "config_record",
     "knowledge_record",

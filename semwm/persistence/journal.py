@@ -17,13 +17,17 @@ since the last checkpoint).
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import gzip
 import json
+import logging
 import os
 import sqlite3
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
@@ -37,9 +41,16 @@ from semwm.persistence.records import (
 )
 from semwm.persistence.snapshot import Snapshot
 
+logger = logging.getLogger("semwm.persistence")
+
 SyncPolicy = Literal["always", "batch"]
 SYNC_POLICIES: tuple[str, ...] = ("always", "batch")
 DATABASE = "semwm.sqlite3"
+HEAD = "semwm.head"
+"""Beside the database: the seq of the last committed record, rewritten after each
+commit (issue 30). SQLite cannot tell a write-ahead log cut short, filled with garbage
+or deleted from one that never held more: its frames just end. The head file says
+how far the journal reached, so records lost that way are detected and named."""
 ARCHIVE = "archive"
 STORE_FORMAT = 1
 _SCHEMA = """
@@ -57,6 +68,60 @@ class StoreError(RuntimeError):
     """The data directory cannot be used as it is (the message says why and where)."""
 
 
+@dataclass
+class Damage:
+    """What an integrity check of the store found (empty: nothing).
+
+    ``problems``: one sentence each; ``lost``: the first and last seq of records the
+    store should hold and does not (``None`` if none are known lost)."""
+
+    problems: list[str] = field(default_factory=list)
+    lost: tuple[int, int] | None = None
+
+    def __bool__(self) -> bool:
+        return bool(self.problems)
+
+    def lose(self, first: int, last: int) -> None:
+        if self.lost is None:
+            self.lost = (first, last)
+        else:
+            self.lost = (min(self.lost[0], first), max(self.lost[1], last))
+
+
+class WriteFailed(RuntimeError):
+    """A write to the store failed and nothing of it was kept (the transaction was rolled
+    back). ``full``: the disk (or the file system's quota) is full; writes can succeed
+    again once space returns."""
+
+    def __init__(self, message: str, *, full: bool) -> None:
+        super().__init__(message)
+        self.full = full
+
+
+SQLITE_FULL = 13
+"""SQLite's result code for "database or disk is full"."""
+
+Fault = Callable[[str], None]
+"""A test's fault hook: called with the step about to run (``"append"``,
+``"snapshot"``, ``"commit"``; ``"probe"`` in ``DurableWorld.writable``); raising
+there is what the step would raise (for example SQLite's "database or disk is full")."""
+
+
+def is_full(error: BaseException) -> bool:
+    """Whether ``error`` says the disk is full (SQLite's SQLITE_FULL, or ENOSPC/EDQUOT)."""
+    if isinstance(error, sqlite3.Error):
+        code = getattr(error, "sqlite_errorcode", None)
+        return (code is not None and code & 0xFF == SQLITE_FULL) or "full" in str(error)
+    return isinstance(error, OSError) and error.errno in (errno.ENOSPC, errno.EDQUOT)
+
+
+def write_failed(path: Path, error: BaseException) -> WriteFailed:
+    """``error`` of a write to ``path`` as :class:`WriteFailed`."""
+    full = is_full(error)
+    what = "the disk is full" if full else "the write failed"
+    return WriteFailed(f"{path}: {what} ({error}); nothing of the change was stored", full=full)
+
+
 class Journal:
     """The SQLite store of a data directory.
 
@@ -71,6 +136,9 @@ class Journal:
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.sync = sync
         self.path = self.data_dir / DATABASE
+        self.head_path = self.data_dir / HEAD
+        self.existed = self.path.exists() or self.head_path.exists()
+        self._head: int | None = None
         try:
             self._db = sqlite3.connect(self.path, isolation_level=None, check_same_thread=False)
             self._db.execute("PRAGMA journal_mode=WAL")
@@ -86,6 +154,7 @@ class Journal:
                 f"{self.path}: store format {found}; this code reads format {STORE_FORMAT}"
             )
         self._in_transaction = False
+        self.fault: Fault | None = None
 
     # -- meta ------------------------------------------------------------------------------
     def meta(self, key: str) -> str | None:
@@ -98,27 +167,112 @@ class Journal:
     # -- appending -------------------------------------------------------------------------
     @contextmanager
     def transaction(self) -> Iterator[None]:
-        """Everything inside is committed together, or rolled back on an exception."""
-        self._db.execute("BEGIN IMMEDIATE")
+        """Everything inside is committed together, or rolled back on an exception.
+
+        A store error (a full disk, an I/O error) in the body or at the commit rolls
+        everything back and raises :class:`WriteFailed`: the transaction is over either
+        way, so the next one can start (a failed ``COMMIT`` used to leave it open).
+        """
+        try:
+            self._db.execute("BEGIN IMMEDIATE")
+        except (sqlite3.Error, OSError) as error:
+            raise write_failed(self.path, error) from error
         self._in_transaction = True
         try:
-            yield
-        except BaseException:
-            self._db.execute("ROLLBACK")
-            raise
-        else:
-            self._db.execute("COMMIT")
+            try:
+                yield
+                self._fault("commit")
+                self._db.execute("COMMIT")
+            except BaseException as error:
+                self._rollback()
+                self._head = None
+                if isinstance(error, sqlite3.Error | OSError):
+                    raise write_failed(self.path, error) from error
+                raise
         finally:
             self._in_transaction = False
+        if self._head is not None:
+            self.write_head(self._head)
+            self._head = None
+
+    # -- the head file and integrity -------------------------------------------------------
+    def write_head(self, seq: int) -> None:
+        """Note ``seq`` as the last committed record (not synced: after a power loss the
+        head can only be older than the database, which is never taken for damage)."""
+        try:
+            fd = os.open(self.head_path, os.O_WRONLY | os.O_CREAT, 0o644)
+            try:
+                os.pwrite(fd, f"{seq:020d}\n".encode(), 0)
+            finally:
+                os.close(fd)
+        except OSError as error:  # the head is a check, not the data: go on without it
+            logger.warning("%s: cannot write the head file (%s)", self.head_path, error)
+
+    def read_head(self) -> int | None:
+        """The seq the head file names, ``None`` without a readable one."""
+        try:
+            text = self.head_path.read_bytes()[:21].decode("ascii")
+            return int(text.strip())
+        except (OSError, ValueError):
+            return None
+
+    def check(self) -> Damage:
+        """The store's integrity: SQLite's ``quick_check``, gaps in the sequence numbers,
+        and records the head file says were committed but are missing. Reads only."""
+        damage = Damage()
+        try:
+            rows = [str(r[0]) for r in self._db.execute("PRAGMA quick_check").fetchall()]
+        except sqlite3.DatabaseError as error:
+            rows = [str(error)]
+        if rows != ["ok"]:
+            damage.problems.append(
+                f"{self.path}: SQLite's integrity check failed: {'; '.join(rows[:5])}"
+            )
+        archived = int(self.meta("archived_through") or 0)
+        previous = archived
+        gaps = self._db.execute(
+            "SELECT seq, prev FROM (SELECT seq, LAG(seq) OVER (ORDER BY seq) AS prev "
+            "FROM journal) WHERE prev IS NOT NULL AND seq != prev + 1"
+        ).fetchall()
+        first = self.first_seq()
+        if first is not None and previous and first != previous + 1:
+            gaps.insert(0, (first, previous))
+        for seq, prev in gaps:
+            damage.problems.append(
+                f"{self.path}: journal records {prev + 1} to {seq - 1} are missing"
+            )
+            damage.lose(int(prev) + 1, int(seq) - 1)
+        head = self.read_head()
+        last = self.last_seq()
+        if head is not None and head > last:
+            damage.problems.append(
+                f"{self.path}: the journal ends at record {last}, but record {head} was "
+                f"committed ({self.head_path.name}): the write-ahead log or the database "
+                "lost records (cut, overwritten or deleted)"
+            )
+            damage.lose(last + 1, head)
+        return damage
+
+    def _rollback(self) -> None:
+        if self._db.in_transaction:
+            # SQLite may have rolled back itself (a failed COMMIT can)
+            with contextlib.suppress(sqlite3.Error):
+                self._db.execute("ROLLBACK")
+
+    def _fault(self, step: str) -> None:
+        if self.fault is not None:
+            self.fault(step)
 
     def append(self, record: Record) -> int:
         """Store ``record`` after the last one; returns its ``seq``."""
         text = record.payload_json()
+        self._fault("append")
         seq = self.last_seq() + 1
         self._db.execute(
             "INSERT INTO journal (seq, kind, wall_time, payload, crc) VALUES (?, ?, ?, ?, ?)",
             (seq, record.kind, record.wall_time or time.time(), text, checksum(record.kind, text)),
         )
+        self._head = seq  # written to the head file once committed
         return seq
 
     # -- reading ---------------------------------------------------------------------------
@@ -155,11 +309,13 @@ class Journal:
         many records."""
         cursor = self._db.execute("DELETE FROM journal WHERE seq >= ?", (from_seq,))
         self._db.execute("DELETE FROM snapshots WHERE seq >= ?", (from_seq,))
+        self._head = from_seq - 1
         return int(cursor.rowcount)
 
     # -- snapshots -------------------------------------------------------------------------
     def save_snapshot(self, snapshot: Snapshot, keep: int = 2) -> None:
         """Store ``snapshot``; only the ``keep`` newest stay."""
+        self._fault("snapshot")
         self._db.execute(
             "INSERT OR REPLACE INTO snapshots VALUES (?, ?, ?, ?, ?, ?)",
             (

@@ -208,6 +208,7 @@ def test_a_read_token_guards_reads_and_health_details(sim1: Path) -> None:
         assert client.get("/health").json() == {
             "status": "ok", "knowledge": None, "time": None, "hypotheses": None,
             "objects": None, "commit": None, "hypotheses_log10_joint": None,
+            "store_damage": None, "lost_records": None,
         }  # fmt: skip
         assert client.get("/ready").status_code == 200
         for token in (READ, TOKEN):

@@ -151,7 +151,7 @@ def test_semwm_serve_command(knowledge_file: Path) -> None:
             except httpx.TransportError:
                 assert time.monotonic() < deadline, "semwm serve did not start"
                 time.sleep(0.1)
-        assert health.json()["knowledge"] == str(knowledge_file)
+        assert health.json()["knowledge"] == knowledge_file.name
         batch = [{"time": 1.0, "class": "Cup", "position": [1.0, 1.0]}] * 4
         too_big = httpx.post(f"{url}/detections", json={"detections": batch})
         assert too_big.status_code == 422  # SEMWM_MAX_BATCH=3 took effect

@@ -80,7 +80,7 @@ def test_a_bad_exchange_is_a_422_naming_the_field_and_changes_nothing(
 
 def test_far_future_time_is_refused_naming_the_bound_and_reported(client: TestClient) -> None:
     assert client.post("/detections", json=cup(1.0)).status_code == 200
-    response = client.post("/detections", json={"detections": [cup(1.5), cup(1e15)]})
+    response = client.post("/detections", json={"detections": [cup(1.5), cup(1e11)]})
     assert response.status_code == 422, response.text
     item = response.json()["detail"][0]
     assert item["loc"] == ["body", "detections", 1, "time"] and "max_ahead" in item["msg"]
@@ -137,7 +137,7 @@ def test_real_server_refuses_1e15_and_accepts_later_real_detections(knowledge_fi
         httpx.Client(base_url=url) as http,
     ):
         assert http.post("/detections", json=cup(4.4)).status_code == 200
-        refused = http.post("/detections", json=cup(1e15))
+        refused = http.post("/detections", json=cup(1e11))
         assert refused.status_code == 422 and "max_ahead = 10 s" in refused.text
         for t in (4.9, 5.4, 6.6):
             assert http.post("/detections", json=cup(t)).status_code == 200

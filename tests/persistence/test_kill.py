@@ -45,12 +45,13 @@ def _no_server_left() -> Iterator[None]:
 class Server:
     """``semwm serve --port 0 --data-dir DIR`` in a subprocess (so it can be SIGKILLed)."""
 
-    def __init__(self, data_dir: Path, log: Path) -> None:
+    def __init__(self, data_dir: Path, log: Path, *options: str) -> None:
         knowledge = shipped_knowledge_path("sim1.yaml")
         command = [
             sys.executable, "-m", "semwm.cli", "serve", "--knowledge", str(knowledge),
             "--port", "0", "--data-dir", str(data_dir), "--reorder-window", "1.0",
             "--snapshot-every", "25", "--compact-every", "40", "--log-level", "info",
+            *options,
         ]  # fmt: skip
         self.log = log
         with log.open("w") as out:
@@ -199,11 +200,20 @@ def test_truncated_write_ahead_log_is_cut_at_the_last_whole_commit(tmp_path: Pat
     assert size > 1000, "the commits should still be in the write-ahead log"
     with wal.open("r+b") as handle:  # power loss mid-write: the last frames are torn
         handle.truncate(size - 700)
-    server = Server(data_dir, tmp_path / "b.log")
+    # acknowledged records are gone: the service says so and, by default, does not start
+    refused = subprocess.run(
+        [sys.executable, "-m", "semwm.cli", "serve", "--knowledge",
+         str(shipped_knowledge_path("sim1.yaml")), "--port", "0", "--data-dir", str(data_dir)],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert refused.returncode != 0 and "are lost" in refused.stderr + refused.stdout
+    server = Server(data_dir, tmp_path / "b.log", "--on-damage", "truncate")
     state = server.state()
     batches, digest = offline(data_dir)
     assert state["digest"] == digest
     assert 0 < len(batches) < 30, "SQLite keeps the whole commits before the torn frame"
     times = [b[0]["time"] for b in batches]
     assert times == [0.1 * i for i in range(len(batches))], "a prefix, in order"
+    recovery = state["journal"]["recovery"]
+    assert recovery["lost"] == [2 + len(batches) + 1, 2 + 30] and not recovery["new"]
     server.kill()
