@@ -23,6 +23,7 @@ from typing import Any, TextIO
 import numpy as np
 from tqdm import tqdm
 
+from semwm.cli.common import require
 from semwm.knowledge import KnowledgeError, load_knowledge
 from semwm.persistence.records import ReadReport, Record, RecordError, batch_parts
 from semwm.persistence.replay import Replayer, model_digest
@@ -137,18 +138,32 @@ def _start_recorder(path: Path, replayer: Replayer) -> Any:
     return recorder
 
 
+def _message(error: Exception) -> str:
+    """An error as one line: ``FILE: no such file`` rather than ``[Errno 2] ...``."""
+    if isinstance(error, OSError) and error.filename is not None:
+        return f"{error.filename}: {error.strerror or error}"
+    return str(error)
+
+
+def _require_mcap(source: str, what: str) -> None:
+    if Path(source).suffix == ".mcap":
+        require("mcap", what)
+
+
 def replay_command(args: argparse.Namespace) -> int:
+    _require_mcap(args.source, "replaying an MCAP file")
     out = Path(args.out) if args.out else Path("runs") / f"replay-{Path(args.source).stem}"
     try:
         metrics = run_replay(args.source, out, args.knowledge, args.speed, not args.no_progress)
     except (FileNotFoundError, KnowledgeError, RecordError, ImportError) as error:
-        print(f"semwm replay: {error}", file=sys.stderr)
+        print(f"semwm replay: {_message(error)}", file=sys.stderr)
         return 2
     _summary("replay", out, metrics)
     return 0
 
 
 def record_command(args: argparse.Namespace) -> int:
+    require("mcap", "recording")
     target = Path(args.output)
     out = target.parent if args.out is None else Path(args.out)
     try:
@@ -156,7 +171,7 @@ def record_command(args: argparse.Namespace) -> int:
             args.source, out, args.knowledge, None, not args.no_progress, recorder_path=target
         )
     except (FileNotFoundError, KnowledgeError, RecordError, ImportError) as error:
-        print(f"semwm record: {error}", file=sys.stderr)
+        print(f"semwm record: {_message(error)}", file=sys.stderr)
         return 2
     _summary("record", out, metrics)
     print(f"recorded {target}")
