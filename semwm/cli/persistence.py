@@ -5,7 +5,8 @@
   through a world model and writes ``world.jsonl`` (the world published after
   each batch) and ``metrics.json``.
 * ``semwm record SOURCE OUT.mcap`` runs the same and records it as MCAP
-  (``pip install "semwm[mcap]"``); it also writes ``world.jsonl`` beside it.
+  (``pip install "semwm[mcap]"``); with ``--out DIR`` it also writes
+  ``world.jsonl`` and ``metrics.json`` there.
 * ``semwm journal export DATA_DIR [OUT.jsonl]``, ``semwm journal compact DATA_DIR``
   (with the server stopped).
 """
@@ -13,6 +14,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time as clock
@@ -50,24 +52,30 @@ def _paced(records: Iterator[Record], speed: float | None) -> Iterator[Record]:
 
 def run_replay(
     source: str,
-    out: Path,
+    out: Path | None,
     knowledge_path: Path | None = None,
     speed: float | None = None,
     progress: bool = True,
     recorder_path: Path | None = None,
 ) -> dict[str, Any]:
-    """Replay ``source`` into ``out`` (world.jsonl, metrics.json); returns the metrics."""
+    """Replay ``source`` into ``out`` (world.jsonl, metrics.json; ``None``: neither, as
+    ``semwm record`` without ``--out``); returns the metrics."""
     from semwm.persistence.sources import open_records
 
     knowledge = load_knowledge(knowledge_path) if knowledge_path else None
     replayer = Replayer(knowledge, strict=False)
     report = ReadReport()
-    out.mkdir(parents=True, exist_ok=True)
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
     seconds: list[float] = []
     sizes: list[int] = []
     recorder = None
     with (
-        (out / "world.jsonl").open("w", encoding="utf-8") as worlds,
+        (
+            (out / "world.jsonl").open("w", encoding="utf-8")
+            if out is not None
+            else contextlib.nullcontext(None)
+        ) as worlds,
         tqdm(disable=not progress, desc=f"replay {source}", unit="rec", leave=False) as bar,
     ):
         for record in _paced(open_records(source, report), speed):
@@ -85,7 +93,8 @@ def run_replay(
             sizes.append(len(batch_parts(record.payload)[0]))
             assert replayer.model is not None
             state = replayer.model.world()
-            _write_world(worlds, state.to_dict())
+            if worlds is not None:
+                _write_world(worlds, state.to_dict())
             if recorder is not None:
                 recorder.write_world(state)
     if recorder is not None:
@@ -113,7 +122,8 @@ def run_replay(
             "total_ingest_s": float(sum(seconds)),
         },
     }
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+    if out is not None:
+        (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     return metrics
 
 
@@ -165,7 +175,7 @@ def replay_command(args: argparse.Namespace) -> int:
 def record_command(args: argparse.Namespace) -> int:
     require("mcap", "recording")
     target = Path(args.output)
-    out = target.parent if args.out is None else Path(args.out)
+    out = None if args.out is None else Path(args.out)
     try:
         metrics = run_replay(
             args.source, out, args.knowledge, None, not args.no_progress, recorder_path=target
@@ -178,11 +188,12 @@ def record_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def _summary(what: str, out: Path, metrics: dict[str, Any]) -> None:
+def _summary(what: str, out: Path | None, metrics: dict[str, Any]) -> None:
+    wrote = f"; wrote {out}/world.jsonl, metrics.json" if out is not None else ""
     print(
         f"{what} {metrics['source']}: {metrics['batches']} batches, "
         f"{metrics['n_detections']} detections, {metrics['refused_batches']} refused, "
-        f"{metrics['objects_at_end']} objects at the end; wrote {out}/world.jsonl, metrics.json"
+        f"{metrics['objects_at_end']} objects at the end{wrote}"
     )
     if metrics["tail_problem"]:
         print(f"warning: {metrics['tail_problem']}")
@@ -248,7 +259,9 @@ def add_record_command(subparsers: Any) -> argparse.ArgumentParser:
     )
     _common(parser)
     parser.add_argument("output", help="the MCAP file to write")
-    parser.add_argument("--out", help="where world.jsonl and metrics.json go (default: beside)")
+    parser.add_argument(
+        "--out", help="also write world.jsonl and metrics.json into this folder (default: not)"
+    )
     parser.set_defaults(func=record_command)
     return parser
 
