@@ -177,3 +177,11 @@ def test_help_lists_every_scenario(folder: Path) -> None:
     listed = " ".join(result.stdout.split())  # the list is wrapped
     for name in [*SCENARIOS, "kick"]:
         assert f" {name}," in listed or f" {name};" in listed, name
+
+
+def test_replay_of_a_ros2_bag_without_the_ros2_extra(folder: Path) -> None:
+    result = semwm(
+        folder, "replay", "bag", "--ros2-detections", "/detections", "--out", "r", hide="rosbags"
+    )
+    assert_clean(result, 'reading a ROS 2 bag needs rosbags: pip install "semwm[ros2]"')
+    assert not (folder / "r").exists()
