@@ -75,5 +75,11 @@ def test_readme_is_a_front_door() -> None:
     commands = [line for line in first_screen if line.startswith("python3 -m venv")]
     assert commands == [INSTALL, TEST]  # byte-identical: CI runs them
     for name in ("benchmarks/README.md", "docs/operations.md", "docs/ros2.md",
-                 "docs/limitations.md"):  # fmt: skip
+                 "docs/limitations.md", "docs/moving-objects.md"):  # fmt: skip
         assert f"]({name}" in "\n".join(lines), name
+
+
+def test_the_shipped_files_table_lists_every_shipped_knowledge_file() -> None:
+    table = (ROOT / "docs" / "knowledge.md").read_text(encoding="utf-8")
+    for path in sorted((ROOT / "knowledge").glob("*.yaml")):
+        assert f"| `knowledge/{path.stem}.*` |" in table, path.name
