@@ -251,9 +251,12 @@ class WorldObjectOut(BaseModel):
 
     model_config = ConfigDict(populate_by_name=True)
 
-    id: int
-    cls: str = Field(alias="class")
-    label: str | None
+    id: int = Field(
+        description="public id: stays with the object while it lives; a provisional negative "
+        "id for an object below the publishing threshold that min_existence asked for"
+    )
+    cls: str = Field(alias="class", description="its most probable class")
+    label: str | None = Field(description="its identity, from labelled detections (else null)")
     position: list[float] = Field(description="m")
     velocity: list[float] | None = Field(description="m/s; null for classes without velocity")
     covariance: list[list[float]] = Field(description="position covariance (m^2)")
@@ -306,18 +309,30 @@ class HypothesisObjectOut(BaseModel):
 
     model_config = ConfigDict(populate_by_name=True)
 
-    id: int | None = Field(description="public id, if the object was ever published")
-    track: int
-    cls: str = Field(alias="class")
-    label: str | None
-    position: list[float]
-    existence: float = Field(description="its existence probability in this hypothesis")
+    id: int | None = Field(
+        description="its public id (as in GET /world) if the object was ever published; null "
+        "for an object that exists only in this hypothesis's view so far (e.g. one new "
+        "detection, or an alternative not yet the most probable)"
+    )
+    track: int = Field(
+        description="the filter's internal number of the object's lineage (its versions since "
+        "its first detection): the same number in two hypotheses is the same object; not a "
+        "public id (use id)"
+    )
+    cls: str = Field(alias="class", description="its class in this hypothesis")
+    label: str | None = Field(description="its identity, from labelled detections (else null)")
+    position: list[float] = Field(description="its estimated position (m)")
+    existence: float = Field(
+        description="its existence probability in this hypothesis (mht; 1 under paper)"
+    )
 
 
 class HypothesisOut(BaseModel):
     """One hypothesis: its probability and its objects."""
 
-    probability: float
+    probability: float = Field(
+        description="probability of this global hypothesis (one hypothesis of each cluster)"
+    )
     log10_probability: float = Field(
         description="log10 of the probability (exact where the probability rounds to 0)"
     )

@@ -2,11 +2,17 @@
 
     python examples/render.py              # all notebooks
     python examples/render.py 02_person    # those whose name contains 02_person
+    python examples/render.py --check      # exit 1 if a published page differs from a fresh run
 
 Each ``examples/NAME.ipynb`` is run top to bottom (nbclient, on the interpreter
 running this script, from ``examples/``) and written as ``docs/examples/NAME.md``
 with its figures in ``docs/examples/NAME_files/`` (nbconvert's Markdown exporter);
 the committed notebooks stay without outputs. Needs ``pip install -e ".[notebooks]"``.
+
+A published page is current when a fresh run gives the same page: the same text
+(every printed number and table) and the same figures, pixel for pixel (PNG
+metadata such as the matplotlib version aside). ``tests/examples`` checks that with
+:func:`differences`; when the code's results change, regenerate with this script.
 """
 
 from __future__ import annotations
@@ -95,9 +101,63 @@ def publish(notebook: Any, name: str, docs: Path = DOCS) -> Path:
     return out
 
 
+REGENERATE = "python examples/render.py"
+
+
+def _pixels(path: Path) -> Any:
+    import matplotlib.image
+
+    return matplotlib.image.imread(path)
+
+
+def _first_text_difference(published: str, fresh: str) -> str:
+    old, new = published.splitlines(), fresh.splitlines()
+    for number, (a, b) in enumerate(zip(old, new, strict=False), start=1):
+        if a != b:
+            return f"line {number}: published {a.strip()!r}, a fresh run {b.strip()!r}"
+    return f"published {len(old)} lines, a fresh run {len(new)}"
+
+
+def differences(notebook: Any, name: str, docs: Path = DOCS) -> list[str]:
+    """How the published ``docs/NAME.md`` (and its figures) differ from what the
+    executed ``notebook`` publishes; empty when the page is current."""
+    import numpy as np
+
+    page = docs / f"{name}.md"
+    if not page.is_file():
+        return [f"{page} is missing"]
+    with tempfile.TemporaryDirectory() as fresh_root:
+        fresh_docs = Path(fresh_root)
+        fresh_page = publish(notebook, name, fresh_docs)
+        found: list[str] = []
+        published_text = page.read_text(encoding="utf-8")
+        fresh_text = fresh_page.read_text(encoding="utf-8")
+        if published_text != fresh_text:
+            found.append(f"{page}: {_first_text_difference(published_text, fresh_text)}")
+        files = f"{name}_files"
+        published_figures = sorted(p.name for p in (docs / files).glob("*.png"))
+        fresh_figures = sorted(p.name for p in (fresh_docs / files).glob("*.png"))
+        if published_figures != fresh_figures:
+            found.append(
+                f"{docs / files}: figures {published_figures}, a fresh run {fresh_figures}"
+            )
+        for figure in sorted(set(published_figures) & set(fresh_figures)):
+            old, new = _pixels(docs / files / figure), _pixels(fresh_docs / files / figure)
+            if old.shape != new.shape:
+                found.append(
+                    f"{docs / files / figure}: {old.shape} pixels, a fresh run {new.shape}"
+                )
+            elif changed := int(np.count_nonzero(np.abs(old - new).max(axis=-1) > 1.5 / 255)):
+                found.append(f"{docs / files / figure}: {changed} pixels differ from a fresh run")
+        return found
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("names", nargs="*", help="only notebooks whose name contains one of these")
+    parser.add_argument(
+        "--check", action="store_true", help="publish nothing; exit 1 if a page is not current"
+    )
     args = parser.parse_args(argv)
     notebooks = sorted(EXAMPLES.glob("*.ipynb"))
     if args.names:
@@ -105,11 +165,22 @@ def main(argv: list[str] | None = None) -> int:
     if not notebooks:
         print(f"no notebook in {EXAMPLES} matches {args.names}", file=sys.stderr)
         return 2
+    stale = 0
     with pinned_kernel() as kernel:
         for path in notebooks:
             print(f"{path.name}: running", flush=True)
-            out = publish(execute(path, kernel), path.stem)
+            notebook = execute(path, kernel)
+            if args.check:
+                found = differences(notebook, path.stem)
+                stale += bool(found)
+                for line in found:
+                    print(f"  stale: {line}", flush=True)
+                continue
+            out = publish(notebook, path.stem)
             print(f"{path.name}: wrote {out.relative_to(EXAMPLES.parent)}", flush=True)
+    if stale:
+        print(f"{stale} page(s) not current: regenerate with {REGENERATE}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -91,6 +91,14 @@ class Parsed:
 
 def parse_body(payload: Any, max_batch: int) -> Parsed:
     """Check one detection or ``{"detections": [...]}``, collecting every problem."""
+    if isinstance(payload, list):  # a bare array: say how a batch is sent
+        parsed = Parsed(batch=False)
+        parsed.problem(
+            ["body"],
+            'a batch is an object: send {"detections": [...]}, not a bare JSON array',
+            "model_type",
+        )
+        return parsed
     if not (isinstance(payload, dict) and "detections" in payload):
         parsed = Parsed(batch=False)
         parsed.add(payload, 0, ("body",))

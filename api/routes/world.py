@@ -138,7 +138,10 @@ def get_hypotheses(
     world: WorldDep,
     limit: Annotated[int, Query(ge=1, le=1000, description="How many, best first.")] = 10,
 ) -> HypothesesOut:
-    """The ``limit`` most probable hypotheses with their probabilities and objects."""
+    """The ``limit`` most probable global hypotheses, best first, with their
+    probabilities and objects. An object's ``id`` is its public id if a published
+    world ever held it, else ``null``; ``track`` is the filter's internal lineage
+    number, the same in every hypothesis that holds the same object."""
     counts, summaries = world.hypotheses(limit)
     return HypothesesOut(
         **counts, hypotheses=[HypothesisOut.model_validate(h.to_dict()) for h in summaries]

@@ -44,6 +44,18 @@
   function fmt(value, digits = 2) {
     return value === null || value === undefined ? "–" : Number(value).toFixed(digits);
   }
+  // A detection time: seconds since the Unix epoch (from 2001 on: a robot's clock) as
+  // the local time of day, "14:21:00.25"; a scenario's or a log's own seconds as "12.40 s".
+  const EPOCH_FROM = 1e9;
+  function timeText(value, digits = 2) {
+    if (value === null || value === undefined) return "–";
+    const t = Number(value);
+    if (t < EPOCH_FROM) return `${t.toFixed(digits)} s`;
+    const date = new Date(t * 1000);
+    const pad = (n) => String(n).padStart(2, "0");
+    const seconds = (date.getSeconds() + (t % 1)).toFixed(digits).padStart(digits ? 3 + digits : 2, "0");
+    return `${pad(date.getHours())}:${pad(date.getMinutes())}:${seconds}`;
+  }
   // Principal axes of [[a, b], [b, c]]: lambda = (a+c)/2 +- sqrt(((a-c)/2)^2 + b^2),
   // angle of the first axis = atan2(2b, a-c) / 2.
   function axes(cov) {
@@ -252,8 +264,8 @@
     row(table, "σ major / minor (m)", `${fmt(a.s1, 3)} / ${fmt(a.s2, 3)}`);
     row(table, "existence", fmt(obj.existence, 3));
     if (obj.confidence) row(table, "confidence", `${fmt(obj.confidence.value, 3)} (${obj.confidence.state})`);
-    row(table, "last seen (s)", fmt(obj.last_seen, 2));
-    row(table, "created (s)", fmt(obj.created, 2));
+    row(table, "last seen", timeText(obj.last_seen, 2));
+    row(table, "created", timeText(obj.created, 2));
     if (obj.mode_probabilities) {
       row(table, "motion modes", Object.entries(obj.mode_probabilities)
         .map(([m, p]) => `${m} ${(100 * p).toFixed(0)}%`).join(", "));
@@ -267,7 +279,7 @@
     history.className = "history";
     const list = document.createElement("table");
     row(list, "t (s)", "x, y (m)");
-    for (const p of points.slice(-30).reverse()) row(list, fmt(p.t, 2), `${fmt(p.x, 3)}, ${fmt(p.y, 3)}`);
+    for (const p of points.slice(-30).reverse()) row(list, timeText(p.t, 2), `${fmt(p.x, 3)}, ${fmt(p.y, 3)}`);
     history.appendChild(list);
     section.appendChild(history);
   }
@@ -282,7 +294,7 @@
     node.className = `status-${text}`;
   }
   function showStats(data) {
-    if ("time" in data) setText("stat-time", data.time === null ? "–" : `${fmt(data.time, 2)} s`);
+    if ("time" in data) setText("stat-time", timeText(data.time, 2));
     if ("objects" in data) {
       setText("stat-objects", Array.isArray(data.objects) ? data.objects.length : data.objects);
     }
@@ -376,7 +388,7 @@
   window.addEventListener("resize", () => { state.dirty = true; });
 
   window.semwmLive = state; // for programs driving the page (tests)
-  window.semwmLivePage = { state, onWorld, onKnowledge, fit };
+  window.semwmLivePage = { state, onWorld, onKnowledge, fit, timeText };
   connect();
   requestAnimationFrame(frame);
 })();

@@ -3,8 +3,9 @@
 Commands:
 
 * ``semwm serve --knowledge FILE``: the HTTP service (OpenAPI at /docs);
-* ``semwm simulate NAME``: run a simulated scenario (sim1, sim2, robocup) through
-  the world model; writes detections, truth, world, metrics and a plot;
+* ``semwm simulate NAME``: run a simulated scenario through the world model;
+  writes detections, truth, world, metrics and a plot. NAME is one of:
+{scenarios};
 * ``semwm knowledge validate|convert|show``: check, convert (XML <-> YAML) and
   inspect knowledge files;
 * ``semwm replay|record|journal``: feed a recording or a data dir back through a
@@ -17,7 +18,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
+import textwrap
 from collections.abc import Callable, Sequence
 from importlib import metadata
 
@@ -55,11 +58,23 @@ def version() -> str:
         return __version__
 
 
+def scenario_names() -> list[str]:
+    """Every name ``semwm simulate`` takes: :data:`semwm.sim.scenarios.SCENARIOS` and kick."""
+    from semwm.sim.scenarios import SCENARIOS
+
+    return [*SCENARIOS, "kick"]
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``semwm`` parser with every command of :data:`COMMANDS`."""
     parser = Parser(
         prog="semwm",
-        description=description(__doc__),
+        description=description(__doc__).replace(
+            "{scenarios}",
+            textwrap.fill(
+                ", ".join(scenario_names()), 78, initial_indent="  ", subsequent_indent="  "
+            ),
+        ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"semwm {version()}")
@@ -98,4 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"semwm {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `semwm simulate sim1 | head -1`: the reader has gone
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit
+        return 141
     return status

@@ -4,6 +4,7 @@ and argument types that reject bad values with a one-line message."""
 from __future__ import annotations
 
 import argparse
+import importlib.util
 from typing import Any, NoReturn
 
 EXIT_OK = 0
@@ -62,3 +63,22 @@ def non_negative_int(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"expected an integer >= 0, found {text!r}")
     return value
+
+
+EXTRAS = {
+    "mcap": ("mcap", "mcap"),
+    "mqtt": ("paho", "paho-mqtt"),
+    "foxglove": ("foxglove", "foxglove-sdk"),
+    "ros2": ("rosbags", "rosbags"),
+}
+"""Each optional extra: the module it brings and the distribution that holds it."""
+
+
+def require(extra: str, what: str) -> None:
+    """A :class:`CommandError` naming the extra to install when ``what`` (an option
+    or a command) needs an optional dependency that is not installed:
+    ``--record needs mcap: pip install "semwm[mcap]"``. Checked before anything is
+    written, so a missing extra leaves no file behind."""
+    module, distribution = EXTRAS[extra]
+    if importlib.util.find_spec(module) is None:
+        raise CommandError(f'{what} needs {distribution}: pip install "semwm[{extra}]"')

@@ -5,7 +5,8 @@
   through a world model and writes ``world.jsonl`` (the world published after
   each batch) and ``metrics.json``.
 * ``semwm record SOURCE OUT.mcap`` runs the same and records it as MCAP
-  (``pip install "semwm[mcap]"``); it also writes ``world.jsonl`` beside it.
+  (``pip install "semwm[mcap]"``); with ``--out DIR`` it also writes
+  ``world.jsonl`` and ``metrics.json`` there.
 * ``semwm journal export DATA_DIR [OUT.jsonl]``, ``semwm journal compact DATA_DIR``
   (with the server stopped).
 """
@@ -13,17 +14,21 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import itertools
 import json
 import sys
 import time as clock
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
 from tqdm import tqdm
 
-from semwm.knowledge import KnowledgeError, load_knowledge
+from semwm.cli.common import CommandError, require
+from semwm.knowledge import Knowledge, KnowledgeError, load_knowledge
 from semwm.persistence.records import ReadReport, Record, RecordError, batch_parts
 from semwm.persistence.replay import Replayer, model_digest
 
@@ -49,27 +54,51 @@ def _paced(records: Iterator[Record], speed: float | None) -> Iterator[Record]:
 
 def run_replay(
     source: str,
-    out: Path,
+    out: Path | None,
     knowledge_path: Path | None = None,
     speed: float | None = None,
     progress: bool = True,
     recorder_path: Path | None = None,
+    ros2: Ros2Input | None = None,
+    ros2_out: Path | None = None,
 ) -> dict[str, Any]:
-    """Replay ``source`` into ``out`` (world.jsonl, metrics.json); returns the metrics."""
+    """Replay ``source`` into ``out`` (world.jsonl, metrics.json; ``None``: neither, as
+    ``semwm record`` without ``--out``); returns the metrics.
+
+    ``ros2``: ``source`` is a ROS 2 bag read as it says (needs ``knowledge_path``);
+    ``ros2_out``: also write each published world to this ROS 2 bag.
+    """
     from semwm.persistence.sources import open_records
 
     knowledge = load_knowledge(knowledge_path) if knowledge_path else None
     replayer = Replayer(knowledge, strict=False)
     report = ReadReport()
-    out.mkdir(parents=True, exist_ok=True)
+    bag_report = None
+    if ros2 is None:
+        records = open_records(source, report)
+    else:
+        if knowledge is None:
+            raise CommandError("a ROS 2 bag carries no knowledge: pass --knowledge FILE")
+        records, bag_report = _bag_records(source, ros2, knowledge)
+    world_bag = None
+    if ros2_out is not None:
+        from semwm.ros2.write import Ros2WorldWriter
+
+        world_bag = Ros2WorldWriter(ros2_out)
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
     seconds: list[float] = []
     sizes: list[int] = []
     recorder = None
     with (
-        (out / "world.jsonl").open("w", encoding="utf-8") as worlds,
+        (
+            (out / "world.jsonl").open("w", encoding="utf-8")
+            if out is not None
+            else contextlib.nullcontext(None)
+        ) as worlds,
         tqdm(disable=not progress, desc=f"replay {source}", unit="rec", leave=False) as bar,
     ):
-        for record in _paced(open_records(source, report), speed):
+        for record in _paced(records, speed):
             start = clock.perf_counter()
             result = replayer.apply(record)
             elapsed = clock.perf_counter() - start
@@ -84,11 +113,16 @@ def run_replay(
             sizes.append(len(batch_parts(record.payload)[0]))
             assert replayer.model is not None
             state = replayer.model.world()
-            _write_world(worlds, state.to_dict())
+            if worlds is not None:
+                _write_world(worlds, state.to_dict())
             if recorder is not None:
                 recorder.write_world(state)
+            if world_bag is not None:
+                world_bag.write(state)
     if recorder is not None:
         recorder.close()
+    if world_bag is not None:
+        world_bag.close()
     counts = replayer.counts
     per = np.asarray(seconds) / np.maximum(np.asarray(sizes), 1) if seconds else np.zeros(1)
     metrics: dict[str, Any] = {
@@ -112,8 +146,40 @@ def run_replay(
             "total_ingest_s": float(sum(seconds)),
         },
     }
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+    if bag_report is not None:
+        metrics["ros2"] = {"report": bag_report.lines(), **bag_report.to_dict()}
+    if ros2_out is not None:
+        metrics["ros2_out"] = str(ros2_out)
+    if out is not None:
+        (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     return metrics
+
+
+@dataclass(frozen=True)
+class Ros2Input:
+    """How to read a ROS 2 bag: its detection topic, sensor pose topic, class map."""
+
+    detections: str
+    pose: str | None = None
+    class_map: Path | None = None
+
+
+def _bag_records(
+    source: str, ros2: Ros2Input, knowledge: Knowledge
+) -> tuple[Iterator[Record], Any]:
+    """The bag's records and the report they fill; the bag and its topics are
+    checked here (the first record read), before anything is written."""
+    from semwm.ros2.classmap import load_class_map
+    from semwm.ros2.convert import BagReport
+    from semwm.ros2.read import bag_records
+
+    class_map = load_class_map(ros2.class_map, set(knowledge.classes)) if ros2.class_map else None
+    bag_report = BagReport()
+    records = bag_records(
+        Path(source), ros2.detections, knowledge, bag_report, class_map, ros2.pose
+    )
+    first = next(records)
+    return itertools.chain([first], records), bag_report
 
 
 def _write_world(handle: TextIO, world: dict[str, Any]) -> None:
@@ -137,40 +203,99 @@ def _start_recorder(path: Path, replayer: Replayer) -> Any:
     return recorder
 
 
+def _message(error: Exception) -> str:
+    """An error as one line: ``FILE: no such file`` rather than ``[Errno 2] ...``."""
+    if isinstance(error, OSError) and error.filename is not None:
+        return f"{error.filename}: {error.strerror or error}"
+    return str(error)
+
+
+def _require_mcap(source: str, what: str) -> None:
+    if Path(source).suffix == ".mcap":
+        require("mcap", what)
+
+
+def _ros2_options(args: argparse.Namespace) -> tuple[Ros2Input | None, Path | None]:
+    """``--ros2-detections``, ``--ros2-pose``, ``--class-map``, ``--ros2-out``, checked."""
+    ros2 = None
+    if args.ros2_detections is not None:
+        require("ros2", "reading a ROS 2 bag")
+        ros2 = Ros2Input(args.ros2_detections, args.ros2_pose, args.class_map)
+    elif args.ros2_pose is not None or args.class_map is not None:
+        raise CommandError("--ros2-pose and --class-map go with --ros2-detections TOPIC")
+    else:
+        _require_mcap(args.source, "replaying an MCAP file")
+    ros2_out = Path(args.ros2_out) if args.ros2_out else None
+    if ros2_out is not None:
+        require("ros2", "--ros2-out")
+        if ros2_out.exists():
+            raise CommandError(f"--ros2-out {ros2_out}: exists already; not overwriting it")
+    return ros2, ros2_out
+
+
 def replay_command(args: argparse.Namespace) -> int:
+    ros2, ros2_out = _ros2_options(args)
     out = Path(args.out) if args.out else Path("runs") / f"replay-{Path(args.source).stem}"
     try:
-        metrics = run_replay(args.source, out, args.knowledge, args.speed, not args.no_progress)
-    except (FileNotFoundError, KnowledgeError, RecordError, ImportError) as error:
-        print(f"semwm replay: {error}", file=sys.stderr)
+        metrics = run_replay(
+            args.source,
+            out,
+            args.knowledge,
+            args.speed,
+            not args.no_progress,
+            ros2=ros2,
+            ros2_out=ros2_out,
+        )
+    except (FileNotFoundError, KnowledgeError, RecordError, ImportError, ValueError) as error:
+        print(f"semwm replay: {_message(error)}", file=sys.stderr)
         return 2
     _summary("replay", out, metrics)
     return 0
 
 
 def record_command(args: argparse.Namespace) -> int:
+    require("mcap", "recording")
+    ros2, ros2_out = _ros2_options(args)
     target = Path(args.output)
-    out = target.parent if args.out is None else Path(args.out)
+    out = None if args.out is None else Path(args.out)
     try:
         metrics = run_replay(
-            args.source, out, args.knowledge, None, not args.no_progress, recorder_path=target
+            args.source,
+            out,
+            args.knowledge,
+            None,
+            not args.no_progress,
+            recorder_path=target,
+            ros2=ros2,
+            ros2_out=ros2_out,
         )
-    except (FileNotFoundError, KnowledgeError, RecordError, ImportError) as error:
-        print(f"semwm record: {error}", file=sys.stderr)
+    except (FileNotFoundError, KnowledgeError, RecordError, ImportError, ValueError) as error:
+        print(f"semwm record: {_message(error)}", file=sys.stderr)
         return 2
     _summary("record", out, metrics)
     print(f"recorded {target}")
     return 0
 
 
-def _summary(what: str, out: Path, metrics: dict[str, Any]) -> None:
+def _summary(what: str, out: Path | None, metrics: dict[str, Any]) -> None:
+    wrote = f"; wrote {out}/world.jsonl, metrics.json" if out is not None else ""
     print(
         f"{what} {metrics['source']}: {metrics['batches']} batches, "
         f"{metrics['n_detections']} detections, {metrics['refused_batches']} refused, "
-        f"{metrics['objects_at_end']} objects at the end; wrote {out}/world.jsonl, metrics.json"
+        f"{metrics['objects_at_end']} objects at the end{wrote}"
     )
     if metrics["tail_problem"]:
         print(f"warning: {metrics['tail_problem']}")
+    if "ros2" in metrics:
+        ros2 = metrics["ros2"]
+        print(
+            f"ROS 2 bag: {ros2['messages']} messages, {ros2['detections']} detections, "
+            f"{ros2['used']} used"
+        )
+        for line in ros2["report"]:
+            print(f"  {line}")
+    if "ros2_out" in metrics:
+        print(f"wrote the world as ROS 2 vision_msgs/msg/Detection3DArray to {metrics['ros2_out']}")
 
 
 def journal_command(args: argparse.Namespace) -> int:
@@ -206,10 +331,37 @@ def journal_command(args: argparse.Namespace) -> int:
 
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "source", help="data directory, FILE.jsonl, FILE.mcap, or a scenario name (sim1, ...)"
+        "source",
+        help="data directory, FILE.jsonl, FILE.mcap, a scenario name (sim1, ...), or a ROS 2 "
+        "bag (folder, .mcap, .db3) with --ros2-detections",
     )
     parser.add_argument("--knowledge", type=Path, help="replay into this knowledge file instead")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    group = parser.add_argument_group('ROS 2 bags (pip install "semwm[ros2]"; docs/ros2.md)')
+    group.add_argument(
+        "--ros2-detections",
+        metavar="TOPIC",
+        help="SOURCE is a ROS 2 bag: build the world from this topic of "
+        "vision_msgs/msg/Detection3DArray or Detection2DArray (needs --knowledge)",
+    )
+    group.add_argument(
+        "--ros2-pose",
+        metavar="TOPIC",
+        help="the sensor's pose in the world (PoseStamped, PoseWithCovarianceStamped or "
+        "Odometry): detections are in the sensor's frame",
+    )
+    group.add_argument(
+        "--class-map",
+        type=Path,
+        metavar="FILE",
+        help="YAML mapping of the detector's class ids to knowledge classes",
+    )
+    group.add_argument(
+        "--ros2-out",
+        metavar="BAG",
+        help="also write each published world to this new ROS 2 bag (folder) as "
+        "vision_msgs/msg/Detection3DArray on /semwm/world",
+    )
 
 
 def add_replay_command(subparsers: Any) -> argparse.ArgumentParser:
@@ -233,7 +385,9 @@ def add_record_command(subparsers: Any) -> argparse.ArgumentParser:
     )
     _common(parser)
     parser.add_argument("output", help="the MCAP file to write")
-    parser.add_argument("--out", help="where world.jsonl and metrics.json go (default: beside)")
+    parser.add_argument(
+        "--out", help="also write world.jsonl and metrics.json into this folder (default: not)"
+    )
     parser.set_defaults(func=record_command)
     return parser
 

@@ -7,12 +7,21 @@ line (or the core) does not import FastAPI.
 from __future__ import annotations
 
 import argparse
-import importlib.util
+import sys
 from pathlib import Path
 
 from pydantic import ValidationError
+from pydantic_core import ErrorDetails
 
-from semwm.cli.common import EXIT_USAGE, LOG_LEVELS, CommandError, Subparsers
+from semwm.cli.common import (
+    EXIT_INVALID,
+    EXIT_USAGE,
+    LOG_LEVELS,
+    CommandError,
+    Subparsers,
+    require,
+)
+from semwm.knowledge.loader import UnknownFormatError, analyse_file
 
 
 def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
@@ -174,6 +183,35 @@ def add_mqtt_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _setting_problem(problem: ErrorDetails) -> str:
+    """One settings error as ``--option: message`` (pydantic's "Value error, " dropped;
+    a whole-settings check names no option)."""
+    message = problem["msg"].removeprefix("Value error, ")
+    if not problem["loc"]:
+        return message
+    return f"--{str(problem['loc'][0]).replace('_', '-')}: {message}"
+
+
+def _check_knowledge(path: Path) -> None:
+    """The knowledge file's problems as ``knowledge validate`` prints them (one
+    ``FILE:LINE: message`` line each, on stderr) and a :class:`CommandError`; before
+    the server starts, so a mistake in the file is no startup traceback."""
+    try:
+        analysis = analyse_file(path)
+    except OSError as error:
+        raise CommandError(f"{path}: {error.strerror or error}", EXIT_INVALID) from None
+    except UnknownFormatError as error:
+        raise CommandError(str(error), EXIT_INVALID) from None
+    if analysis.knowledge is None:
+        for problem in analysis.problems:
+            print(problem, file=sys.stderr)
+        count = len(analysis.problems)
+        raise CommandError(
+            f"{path}: {count} problem{'' if count == 1 else 's'} (above); the server did not start",
+            EXIT_INVALID,
+        )
+
+
 def run_serve(args: argparse.Namespace) -> int:
     """Start uvicorn with the settings from ``args`` over the environment."""
     import uvicorn
@@ -205,20 +243,21 @@ def run_serve(args: argparse.Namespace) -> int:
     try:
         settings = Settings(**given)
     except ValidationError as error:
-        problems = "; ".join(
-            f"{'.'.join(map(str, problem['loc']))}: {problem['msg']}" for problem in error.errors()
-        )
+        problems = "; ".join(_setting_problem(problem) for problem in error.errors())
         raise CommandError(problems, EXIT_USAGE) from None
     if settings.knowledge is None:
         raise CommandError("no knowledge file: pass --knowledge FILE or set SEMWM_KNOWLEDGE")
     if not settings.knowledge.is_file():
         raise CommandError(f"{settings.knowledge}: no such file")
+    _check_knowledge(settings.knowledge)
     if (refusal := settings.bind_problem()) is not None:
         raise CommandError(refusal, EXIT_USAGE)
-    if settings.mqtt is not None and importlib.util.find_spec("paho") is None:
-        raise CommandError('--mqtt needs paho-mqtt: pip install "semwm[mqtt]"')
-    if settings.foxglove_port is not None and importlib.util.find_spec("foxglove") is None:
-        raise CommandError('--foxglove needs foxglove-sdk: pip install "semwm[foxglove]"')
+    if settings.mqtt is not None:
+        require("mqtt", "--mqtt")
+    if settings.foxglove_port is not None:
+        require("foxglove", "--foxglove")
+    if settings.record is not None:
+        require("mcap", "--record")
     log_level = args.serve_log_level or getattr(args, "log_level", None) or "info"
     app = create_app(settings)
     config = uvicorn.Config(

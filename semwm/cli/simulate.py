@@ -23,6 +23,7 @@ measure what a piece of knowledge is worth:
 from __future__ import annotations
 
 import argparse
+import inspect
 import sys
 from pathlib import Path
 from typing import Any
@@ -36,7 +37,7 @@ from semwm.cli.common import (
 )
 from semwm.cli.simulate_team import add_team_options, simulate_team
 from semwm.knowledge.loader import UnknownFormatError, load_document
-from semwm.knowledge.model import KnowledgeDocument
+from semwm.knowledge.model import Knowledge, KnowledgeDocument
 from semwm.knowledge.problems import KnowledgeError
 from semwm.knowledge.resolve import resolve
 from semwm.knowledge.shipped import checkout_knowledge_directory, shipped_knowledge_path
@@ -44,6 +45,11 @@ from semwm.sim.ablations import ABLATIONS, ablate
 from semwm.sim.metrics import Metrics
 from semwm.sim.runner import run_scenario, write_run
 from semwm.sim.scenarios import SCENARIOS, Scenario, make_scenario
+
+SIZED = [
+    name for name, make in SCENARIOS.items() if "duration" in inspect.signature(make).parameters
+]
+"""The scenarios whose duration ``--duration`` sets."""
 
 
 def format_summary(metrics: Metrics, n_detections: int) -> str:
@@ -151,6 +157,31 @@ def scenario_knowledge(scenario: Scenario) -> Path:
     )
 
 
+def _check_fits(scenario: Scenario, knowledge: Knowledge, path: Path) -> None:
+    """A :class:`CommandError` (one line) when the scenario detects a class or uses a
+    detector that ``knowledge`` lacks, or has another dimension: before the run,
+    instead of the world model refusing the first scan."""
+    classes = sorted({d.cls for d in scenario.detections} - set(knowledge.classes))
+    detectors = sorted(
+        {d.detector or knowledge.default_detector for d in scenario.detections}
+        - set(knowledge.detectors)
+    )
+    missing = [f"class {name!r}" for name in classes]
+    missing += [f"detector {name!r}" for name in detectors]
+    if missing:
+        raise CommandError(
+            f"{path} has no {', '.join(missing)} that scenario {scenario.name} detects; "
+            "add them, or run without --knowledge (the scenario's own knowledge)",
+            EXIT_INVALID,
+        )
+    dimension = len(scenario.region)
+    if knowledge.world.dimension != dimension:
+        raise CommandError(
+            f"{path} is {knowledge.world.dimension}-D; scenario {scenario.name} is {dimension}-D",
+            EXIT_INVALID,
+        )
+
+
 def simulate(args: argparse.Namespace) -> int:
     """Run ``semwm simulate``; returns the exit status."""
     if args.name == "kick":
@@ -160,6 +191,11 @@ def simulate(args: argparse.Namespace) -> int:
         if args.name == "sim2":
             print(
                 "semwm simulate: sim2's duration is set by the person's walk; --duration ignored",
+                file=sys.stderr,
+            )
+        elif args.name not in SIZED:
+            print(
+                f"semwm simulate: {args.name} has a fixed duration; --duration ignored",
                 file=sys.stderr,
             )
         else:
@@ -172,6 +208,7 @@ def simulate(args: argparse.Namespace) -> int:
         knowledge = resolve(document, source=str(path))
     except KnowledgeError as error:
         raise CommandError(str(error.problems[0]), EXIT_INVALID) from None
+    _check_fits(scenario, knowledge, path)
     out = args.out or default_out(args.name, args.seed, ablations, args.knowledge)
     if out.exists() and not out.is_dir():
         raise CommandError(f"--out {out}: exists and is not a folder")
@@ -237,7 +274,7 @@ def add_simulate_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         type=positive_float,
         default=None,
         metavar="SECONDS",
-        help="scenario duration in s (sim1, robocup)",
+        help=f"scenario duration in s ({', '.join(SIZED)})",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_team_options(parser)

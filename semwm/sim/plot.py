@@ -128,11 +128,53 @@ def _field_lines(ax: Any) -> None:
             ax.plot([x_line, x_in, x_in, x_line], [-half, -half, half, half], **style)
 
 
+def ordinal(n: int) -> str:
+    """``1st``, ``2nd``, ``3rd``, ``4th``, ``11th``, ``12th``, ``21st``..."""
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
+
+
+def counted(n: int, word: str) -> str:
+    """``1 true object``, ``2 true objects``."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+MAX_SENSOR_PATHS = 2
+"""A scenario whose scans come from at most this many moving sensors (``patrol``'s
+robot) has each sensor's path drawn; more (``robocup``'s team) would hide the tracks."""
+
+
+def sensor_paths(scenario: Scenario) -> dict[str, np.ndarray]:
+    """Source -> its sensor's positions (k, 2), in time order, from the detections'
+    ``sensor_position``; empty for scenarios of fixed sensors or of many."""
+    paths: dict[str, list[tuple[float, float]]] = {}
+    for detection in scenario.detections:
+        if detection.sensor_position is not None:
+            point = (detection.sensor_position[0], detection.sensor_position[1])
+            path = paths.setdefault(detection.source or "sensor", [])
+            if not path or path[-1] != point:
+                path.append(point)
+    if len(paths) > MAX_SENSOR_PATHS:
+        return {}
+    return {source: np.asarray(points) for source, points in paths.items()}
+
+
+def _draw_sensor_paths(ax: Any, scenario: Scenario) -> list[Line2D]:
+    handles = []
+    for source, path in sensor_paths(scenario).items():
+        (line,) = ax.plot(
+            path[:, 0], path[:, 1], color="0.35", lw=1.0, ls=(0, (4, 3)), zorder=1,
+            label=f"sensor path ({source})",
+        )  # fmt: skip
+        handles.append(line)
+    return handles
+
+
 def _draw_detections(ax: Any, scenario: Scenario) -> Line2D:
     detections = np.asarray([d.position[:2] for d in scenario.detections]).reshape(-1, 2)
     step = max(1, int(np.ceil(len(detections) / MAX_DETECTIONS_DRAWN)))
     shown = detections[::step]
-    what = f"every {step}th of {len(detections)}" if step > 1 else f"{len(detections)}"
+    what = f"every {ordinal(step)} of {len(detections)}" if step > 1 else f"{len(detections)}"
     ax.scatter(
         shown[:, 0], shown[:, 1], s=10, facecolors="none", edgecolors="0.65", lw=0.5, zorder=1
     )
@@ -289,7 +331,7 @@ def draw_run(scenario: Scenario, worlds: Sequence[WorldState], metrics: Metrics)
     else:
         ax.plot([x_lo, x_hi, x_hi, x_lo, x_lo], [y_lo, y_lo, y_hi, y_hi, y_lo], color="k", lw=1)
 
-    handles = [_draw_detections(ax, scenario)]
+    handles = [_draw_detections(ax, scenario), *_draw_sensor_paths(ax, scenario)]
     handles += _draw_truth(ax, paths, colours)
     limits = ((x_lo - 0.5, x_hi + 0.5), (y_lo - 0.5, y_hi + 0.5))
     times = np.array([frame.time for frame in scenario.truth])
@@ -338,7 +380,8 @@ def draw_run(scenario: Scenario, worlds: Sequence[WorldState], metrics: Metrics)
     ax.set_title(
         f"{scenario.name} (seed {scenario.seed}, {scenario.duration:g} s): "
         f"GOSPA {gospa.total:.2f} m (c={gospa.c:g} m, p={gospa.p:g}), "
-        f"ID switches {metrics.id_switches}, {len(tracks)} world ids for {len(paths)} true objects",
+        f"ID switches {metrics.id_switches}, {counted(len(tracks), 'world id')} for "
+        f"{counted(len(paths), 'true object')}",
         fontsize=9,
     )
     ax.legend(

@@ -192,3 +192,13 @@ def test_validation_error_echoes_non_finite_input_as_text(client: TestClient) ->
     )
     assert response.status_code == 422
     assert response.json()["detail"][0]["input"] == "nan"
+
+
+def test_a_bare_json_array_is_refused_with_the_batch_shape(seeded: TestClient) -> None:
+    before = snapshot(seeded)
+    response = seeded.post("/detections", json=[OK, with_(time=3.1)])
+    assert response.status_code == 422
+    (item,) = response.json()["detail"]
+    assert item["loc"] == ["body"]
+    assert '{"detections": [...]}' in item["msg"] and "bare JSON array" in item["msg"]
+    assert snapshot(seeded) == before

@@ -136,6 +136,7 @@ def test_the_page_shows_the_world_live(
         details = page.locator("#details").inner_text()
         assert "existence" in details and "Recent track" in details and "r1" in details
         assert int(page.locator("#stat-hypotheses").inner_text()) >= 1
+        assert page.locator("#stat-time").inner_text() == f"{11 * STEP:.2f} s"  # scenario time
         assert page.locator("#stat-rate").inner_text() != "0.0 det/s"
         opacities = page.eval_on_selector_all(
             ".object .dot", "nodes => nodes.map(n => Number(n.getAttribute('fill-opacity')))"
@@ -163,6 +164,22 @@ def test_the_page_shows_the_world_live(
         )
         page.click("[data-class=Cup] circle")
         assert "Cup 87.0%, Can 13.0%" in page.locator("#details").inner_text()
+        # a robot's epoch seconds are a time of day (the page's own time zone)
+        expected_clock = page.evaluate(
+            "() => { const d = new Date(1764066060250); "
+            "const p = (n) => String(n).padStart(2, '0'); "
+            "return `${p(d.getHours())}:${p(d.getMinutes())}:00.25`; }"
+        )
+        page.evaluate(
+            """() => {
+              const w = structuredClone(window.semwmLive.world);
+              w.time = 1764066060.25;
+              window.semwmLivePage.onWorld(w);
+            }"""
+        )
+        page.wait_for_function(
+            f"document.getElementById('stat-time').textContent === {expected_clock!r}"
+        )
         assert "0.900 (valid)" in page.locator("#details").inner_text()
         injected = tmp_path / "live-page-class-probabilities.png"
         page.screenshot(path=str(injected))

@@ -1,5 +1,7 @@
 """Execute every example notebook (examples/*.ipynb) and fail on any cell error;
-every notebook is published with its outputs in docs/examples/.
+every notebook is published with its outputs in docs/examples/, and the published
+page is what this fresh run publishes (text and figures): a page left stale by a
+change of the code fails here, saying to run ``python examples/render.py``.
 
 Notebooks run as ``python examples/render.py`` runs them (its ``pinned_kernel``:
 the interpreter running pytest, so a fresh venv needs no registered kernel).
@@ -58,6 +60,11 @@ def test_notebook_runs(path: Path, kernel_here: str) -> None:
         if out.get("output_type") == "error"
     ]
     assert not errors
+    stale = render.differences(nb, path.stem)
+    assert not stale, (
+        f"docs/examples/{path.stem}.md is not what a fresh run of {path.name} publishes; "
+        f"regenerate the published examples with: {render.REGENERATE}\n" + "\n".join(stale)
+    )
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])

@@ -154,8 +154,8 @@ def test_serve_refuses_a_bad_broker_url_before_starting(capsys: pytest.CaptureFi
 
     status = main(["serve", "--knowledge", str(KNOWLEDGE), "--mqtt", "tcp://127.0.0.1:1883"])
     assert status == 2
-    assert "mqtt: Value error, broker URL must start with mqtt://" in capsys.readouterr().err
+    assert "--mqtt: broker URL must start with mqtt://" in capsys.readouterr().err
     status = main(["serve", "--knowledge", str(KNOWLEDGE), "--mqtt", "mqtt://h:1",
                    "--mqtt-prefix", "a/#"])  # fmt: skip
     assert status == 2
-    assert "mqtt_prefix: Value error, MQTT topic prefix must not contain" in capsys.readouterr().err
+    assert "--mqtt-prefix: MQTT topic prefix must not contain" in capsys.readouterr().err

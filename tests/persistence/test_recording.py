@@ -20,10 +20,17 @@ SIM1 = shipped_knowledge_path("sim1.yaml")
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """``semwm record sim1`` (with its world.jsonl beside it)."""
+    """``semwm record sim1 --out DIR`` (its world.jsonl in DIR, beside it here)."""
     path = tmp_path_factory.mktemp("rec") / "sim1.mcap"
-    assert main(["record", "sim1", str(path), "--no-progress"]) == 0
+    assert main(["record", "sim1", str(path), "--out", str(path.parent), "--no-progress"]) == 0
     return path
+
+
+def test_record_writes_only_the_mcap_file_by_default(tmp_path: Path) -> None:
+    path = tmp_path / "sim1.mcap"
+    assert main(["record", "sim1", str(path), "--no-progress"]) == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["sim1.mcap"]
+    assert recording_summary(path) == TOPICS
 
 
 def test_record_then_replay_gives_the_same_world_jsonl(recording: Path, tmp_path: Path) -> None:

@@ -85,7 +85,8 @@ def test_robocup_detections_are_subsampled_and_every_class_has_a_legend_entry(
     step = int(np.ceil(n / 100))
     assert step > 1
     legend, _, _, _ = _texts(result)
-    assert legend[0] == f"detections (every {step}th of {n})"
+    assert legend[0] == f"detections (every {plot.ordinal(step)} of {n})"
+    assert not any(entry.startswith("sensor path") for entry in legend)  # five robots: none
     for cls in {o.cls for f in result.scenario.truth for o in f.objects}:
         assert f"truth: {cls} path (square: start)" in legend
     path = plot_run(result.scenario, result.worlds, result.metrics, tmp_path / "plot.png")
@@ -99,3 +100,47 @@ def test_a_world_track_line_breaks_where_the_object_was_not_in_the_world() -> No
     assert np.isnan(broken[2]).all()  # absent at 0.2-0.4 s: no line from (1, 0) to (9, 9)
     assert np.array_equal(broken[[0, 1, 3, 4]], rows)
     assert np.array_equal(plot.with_gaps(rows[:2], 0.1), rows[:2])  # no gap: unchanged
+
+
+@pytest.mark.parametrize(
+    ("n", "text"),
+    [(1, "1st"), (2, "2nd"), (3, "3rd"), (4, "4th"), (11, "11th"), (12, "12th"),
+     (13, "13th"), (21, "21st"), (22, "22nd"), (101, "101st"), (111, "111th")],
+)  # fmt: skip
+def test_ordinals(n: int, text: str) -> None:
+    assert plot.ordinal(n) == text
+
+
+def test_the_title_counts_in_the_singular_for_one() -> None:
+    result = _run("sim2")  # one person
+    fig = draw_run(result.scenario, result.worlds, result.metrics)
+    try:
+        title = fig.axes[0].get_title()
+    finally:
+        plt.close(fig)
+    assert title.endswith(" for 1 true object"), title
+    assert "objects" not in title
+
+
+def test_the_patrol_plot_draws_the_robots_path() -> None:
+    from semwm.cli.simulate import scenario_knowledge
+
+    scenario = make_scenario("patrol", 0, duration=10.0)
+    knowledge = load_knowledge(scenario_knowledge(scenario))
+    result = run_scenario(scenario, knowledge, progress=False)
+    fig = draw_run(result.scenario, result.worlds, result.metrics)
+    try:
+        ax = fig.axes[0]
+        legend = [t.get_text() for t in ax.get_legend().get_texts()]
+        (line,) = [line for line in ax.get_lines() if line.get_label() == "sensor path (robot)"]
+        drawn = np.column_stack(line.get_data())
+    finally:
+        plt.close(fig)
+    assert "sensor path (robot)" in legend
+    sensors = [d.sensor_position for d in scenario.detections if d.source == "robot"]
+    assert all(s is not None for s in sensors)
+    distinct = {(s[0], s[1]) for s in sensors if s is not None}
+    assert {tuple(p) for p in drawn} == distinct
+    assert len(drawn) > 10
+    # the path spans the robot's loop, not a point
+    assert np.ptp(drawn[:, 0]) > 2.0 or np.ptp(drawn[:, 1]) > 2.0
