@@ -79,6 +79,7 @@ def create_app(settings: Settings, *, fast_ingest: bool = True) -> FastAPI:
                 )
             app.state.world = WorldService.from_file(
                 settings.knowledge,
+                engine=settings.engine,
                 reorder_window=settings.reorder_window,
                 hold=settings.hold,
                 order_tolerance=settings.order_tolerance,
@@ -88,7 +89,11 @@ def create_app(settings: Settings, *, fast_ingest: bool = True) -> FastAPI:
                 idempotency_keys=settings.idempotency_keys,
                 stuck_after=settings.stuck_after,
             )
-            logger.info("world model built from %s", settings.knowledge)
+            logger.info(
+                "world model built from %s (engine %s)",
+                settings.knowledge,
+                app.state.world.engine,
+            )
         with attach_persistence(app, settings):
             async with _live(app, settings, _service(app)):
                 # The bridge starts on the restored model (queued batches apply at once and

@@ -22,7 +22,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from prometheus_client import CollectorRegistry, Counter, Histogram
-from prometheus_client.core import GaugeMetricFamily, Metric
+from prometheus_client.core import GaugeMetricFamily, InfoMetricFamily, Metric
 from prometheus_client.registry import Collector
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -74,6 +74,11 @@ class WorldCollector(Collector):
         service = self._service()
         if service is None:
             return
+        yield InfoMetricFamily(
+            "semwm_engine",
+            "The engine running the world model's numeric kernels (python or rust)",
+            value={"engine": service.engine},
+        )
         stats = service.stats()
         gauges: list[tuple[str, str, Any]] = [
             ("objects", "Objects in the most probable hypothesis", stats["objects"]),

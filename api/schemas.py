@@ -385,6 +385,7 @@ class HealthOut(BaseModel):
             "examples": [
                 {
                     "status": "ok",
+                    "engine": "python",
                     "knowledge": "knowledge/sim1.yaml",
                     "time": 12.3,
                     "hypotheses": 4,
@@ -396,6 +397,10 @@ class HealthOut(BaseModel):
     )
 
     status: str = "ok"
+    engine: Literal["python", "rust"] | None = Field(
+        default=None,
+        description="Readers only: who runs the world model's numeric kernels (docs/engines.md).",
+    )
     knowledge: str | None = Field(default=None, description="Readers only.")
     time: float | None = Field(default=None, description="Readers only.")
     hypotheses: int | None = Field(

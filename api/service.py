@@ -265,6 +265,11 @@ class WorldService:
             self._summary = self._summarise()
 
     @property
+    def engine(self) -> str:
+        """The engine the served model runs (``python`` or ``rust``); no lock needed."""
+        return self._model.engine
+
+    @property
     def model(self) -> WorldModel:
         """The world model, without the lock: for hooks, which run with it held."""
         return self._model
@@ -336,11 +341,16 @@ class WorldService:
         reorder_window: float = 0.5,
         write_back: bool = False,
         hold: float = 0.0,
+        engine: str | None = None,
         **options: Any,
     ) -> WorldService:
-        """Load ``path`` and build the world model (raises :class:`KnowledgeError`)."""
+        """Load ``path`` and build the world model (raises :class:`KnowledgeError`, and
+        :class:`~semwm.filters.engine.EngineUnavailable` for ``engine="rust"`` without
+        the extension)."""
         return cls(
-            WorldModel(load_knowledge(path), reorder_window=reorder_window, hold=hold),
+            WorldModel(
+                load_knowledge(path), reorder_window=reorder_window, hold=hold, engine=engine
+            ),
             path,
             write_back,
             **options,
@@ -709,6 +719,7 @@ class WorldService:
         damage = self.store_damage
         return {
             "status": "ok",
+            "engine": self.engine,
             "knowledge": str(self.knowledge_path) if self.knowledge_path else None,
             **self._summary,
             "store_damage": damage[0] if damage else None,

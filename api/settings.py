@@ -123,11 +123,16 @@ class Settings(BaseSettings):
         Also stream the world to Foxglove on this port (``foxglove`` extra); 0 picks one.
     log_format
         ``text`` or ``json`` (one JSON object per line), for the service's logs.
+    engine
+        ``python`` or ``rust``: who runs the world model's numeric kernels
+        (docs/engines.md); ``None``: the default, ``python``. ``rust`` needs the built
+        extension ``semwm._core``.
     """
 
     model_config = SettingsConfigDict(env_prefix="SEMWM_", frozen=True, extra="ignore")
 
     knowledge: Path | None = None
+    engine: Literal["python", "rust"] | None = None
     host: str = "127.0.0.1"
     port: Annotated[int, Field(ge=0, le=65535)] = 8000
     reorder_window: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = 0.5
@@ -211,6 +216,11 @@ class Settings(BaseSettings):
     mqtt_prefix: str = "semwm"
     mqtt_world_rate: Annotated[float, Field(gt=0.0)] = 10.0
     mqtt_client_id: Annotated[str | None, Field(min_length=1)] = None
+
+    @field_validator("engine", mode="before")
+    @classmethod
+    def _engine_name(cls, value: object) -> object:
+        return value.strip().lower() if isinstance(value, str) else value
 
     @field_validator("http")
     @classmethod

@@ -44,6 +44,7 @@ from semwm.detection import (
     OutOfOrderError,
     SensorReport,
 )
+from semwm.filters.engine import Engine, resolve_engine
 from semwm.filters.motion import FloatArray
 from semwm.filters.small import mahalanobis_squared
 from semwm.knowledge.model import Knowledge
@@ -255,6 +256,10 @@ class WorldModel:
         included: they are processed on a copy that is not committed. ``0``
         (default): every scan is processed at once. Choose about the sources'
         arrival jitter (docs/operations.md).
+    engine
+        ``"python"`` or ``"rust"``: who runs the numeric kernels (docs/engines.md);
+        ``None`` (default): ``$SEMWM_ENGINE``, else ``"python"``. ``"rust"`` without
+        the built extension raises :class:`~semwm.filters.engine.EngineUnavailable`.
 
     The reorder history is also bounded in count (:attr:`max_reorder_scans`): past
     it the oldest scans are forgotten, and a detection that would have to be
@@ -266,8 +271,14 @@ class WorldModel:
     """Most scans kept for replay; each holds a reference to the state before it."""
 
     def __init__(
-        self, knowledge: Knowledge, *, reorder_window: float = 0.0, hold: float = 0.0
+        self,
+        knowledge: Knowledge,
+        *,
+        reorder_window: float = 0.0,
+        hold: float = 0.0,
+        engine: str | None = None,
     ) -> None:
+        self.engine: Engine = resolve_engine(engine)
         self._summaries: dict[int, tuple[Track, FloatArray, FloatArray, float]] = {}
         if reorder_window < 0 or not math.isfinite(reorder_window):
             raise ValueError(f"reorder_window must be a finite number >= 0; got {reorder_window}")
@@ -279,7 +290,7 @@ class WorldModel:
     # ------------------------------------------------------------------ state
     def _set_knowledge(self, knowledge: Knowledge) -> None:
         self._knowledge = knowledge
-        self._mhf = MultipleHypothesisFilter(knowledge)
+        self._mhf = MultipleHypothesisFilter(knowledge, self.engine)
         self._summaries = {}  # the region may have changed
 
     def reset(self) -> None:

@@ -19,10 +19,10 @@ router = APIRouter(tags=["system"])
 def health(world: WorldDep, settings: SettingsDep, request: Request) -> HealthOut:
     """``ok`` while the process serves requests; it never waits for the world.
 
-    The summary (knowledge file, world time, hypothesis and object counts as of the
-    last accepted change) is given to readers: everyone when reads are open, else
-    only with the read (or write) token. The knowledge file's full path is given only
-    with a token; without one, its name.
+    The summary (the engine running the world model, knowledge file, world time,
+    hypothesis and object counts as of the last accepted change) is given to readers:
+    everyone when reads are open, else only with the read (or write) token. The
+    knowledge file's full path is given only with a token; without one, its name.
     """
     secrets = [s.get_secret_value() for s in (settings.read_token, settings.token) if s]
     has_token = token_matches(bearer(_headers(request)), secrets)

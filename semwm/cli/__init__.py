@@ -65,6 +65,21 @@ def scenario_names() -> list[str]:
     return [*SCENARIOS, "kick"]
 
 
+def engine_line() -> str:
+    """Which engine runs (``$SEMWM_ENGINE``, else python) and whether the Rust core is
+    built: what ``semwm --version`` adds to the version."""
+    from semwm.filters.engine import EngineUnavailable, resolve_engine, rust_core
+
+    core = rust_core()
+    built = f"built (semwm-core {core.__version__})" if core is not None else "not built"
+    engine: str
+    try:
+        engine = resolve_engine()
+    except (ValueError, EngineUnavailable) as error:
+        engine = f"none: {error}"
+    return f"engine: {engine}; Rust core: {built}"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``semwm`` parser with every command of :data:`COMMANDS`."""
     parser = Parser(
@@ -77,7 +92,9 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=f"semwm {version()}")
+    parser.add_argument(
+        "--version", action="version", version=f"semwm {version()} ({engine_line()})"
+    )
     parser.add_argument(
         "--log-level",
         choices=LOG_LEVELS,

@@ -7,6 +7,8 @@ line (or the core) does not import FastAPI.
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import os
 import sys
 from pathlib import Path
 
@@ -35,12 +37,18 @@ def add_serve_command(subparsers: Subparsers) -> argparse.ArgumentParser:
         "SEMWM_WRITE_BACK, SEMWM_TOKEN, "
         "SEMWM_TOKEN_FILE, SEMWM_READ_TOKEN, SEMWM_INSECURE, SEMWM_CORS_ORIGINS, "
         "SEMWM_ALLOWED_HOSTS (JSON lists), SEMWM_MAX_BODY, SEMWM_MAX_SOURCES, "
-        "SEMWM_STUCK_AFTER, SEMWM_MQTT, SEMWM_MQTT_PREFIX, SEMWM_MQTT_WORLD_RATE, "
+        "SEMWM_STUCK_AFTER, SEMWM_ENGINE, SEMWM_MQTT, SEMWM_MQTT_PREFIX, SEMWM_MQTT_WORLD_RATE, "
         "SEMWM_MQTT_CLIENT_ID, SEMWM_FOXGLOVE_PORT, SEMWM_LOG_FORMAT. "
         "The live world page is at /, its stream at /world/stream, Prometheus metrics at "
         "/metrics (docs/operations.md).",
     )
     parser.add_argument("--knowledge", type=Path, help="knowledge file (YAML or XML)")
+    parser.add_argument(
+        "--engine",
+        choices=("python", "rust"),
+        help="who runs the world model's numeric kernels (default python, or "
+        "SEMWM_ENGINE; rust needs the built extension: docs/engines.md)",
+    )
     parser.add_argument("--host", help="address to bind (default 127.0.0.1)")
     parser.add_argument("--port", type=int, help="port (default 8000; 0 picks a free one)")
     parser.add_argument("--reorder-window", type=float, help="seconds (default 0.5)")
@@ -225,6 +233,7 @@ def run_serve(args: argparse.Namespace) -> int:
         key: getattr(args, key)
         for key in (
             "knowledge",
+            "engine",
             "host",
             "port",
             "reorder_window",
@@ -247,6 +256,15 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CommandError(problems, EXIT_USAGE) from None
     if settings.knowledge is None:
         raise CommandError("no knowledge file: pass --knowledge FILE or set SEMWM_KNOWLEDGE")
+    from semwm.filters.engine import ENGINE_ENV, EngineUnavailable, resolve_engine
+
+    try:
+        engine = resolve_engine(settings.engine)
+    except EngineUnavailable as error:
+        raise CommandError(str(error), EXIT_USAGE) from None
+    # every world model this process builds (a data directory's restore and replay
+    # too) runs the same engine
+    os.environ[ENGINE_ENV] = engine
     if not settings.knowledge.is_file():
         raise CommandError(f"{settings.knowledge}: no such file")
     _check_knowledge(settings.knowledge)

@@ -3,17 +3,23 @@
 ``FilterFactory(knowledge).filter_for("Person")`` gives a :class:`ClassFilter`: a
 Kalman filter (one mode) or an IMM (several modes) with its motion models,
 noise and initial state, as batched operations over many objects of the class.
+
+``FilterFactory(knowledge, engine="rust")`` runs the same operations in the Rust core
+(:mod:`semwm.filters.rust`): the factory and each class filter are the one place that
+chooses the engine; their callers do not know which runs.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from semwm.filters import batched
+from semwm.filters import batched, rust, small
+from semwm.filters.engine import Engine
 from semwm.filters.motion import (
     FloatArray,
     MotionOrder,
@@ -22,6 +28,9 @@ from semwm.filters.motion import (
     transition_coefficients,
 )
 from semwm.knowledge.model import IMMFilterSpec, Knowledge, ResolvedClass
+
+if TYPE_CHECKING:
+    from semwm import _core
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,6 +47,10 @@ class ClassFilter:
         ``(M, M)``: ``T[i, j] = P(mode j at k | mode i at k-1)``.
     transition_period
         The time step (s) ``transition`` is stated for; ``None``: one prediction step.
+    engine
+        ``"python"`` (:mod:`semwm.filters.batched`) or ``"rust"``
+        (:mod:`semwm.filters.rust`): who computes :meth:`predict`, :meth:`update` and
+        :meth:`combine`.
     initial_mode_probabilities
         ``(M,)``.
     initial_covariance
@@ -55,6 +68,7 @@ class ClassFilter:
     with_velocity: bool = field(default=False)
     velocity_decay: float = 0.0
     transition_period: float | None = None
+    engine: Engine = "python"
 
     @property
     def modes(self) -> int:
@@ -100,6 +114,21 @@ class ClassFilter:
         result = np.clip(result, 0.0, 1.0)
         result /= result.sum(axis=2, keepdims=True)
         return result
+
+    @property
+    def transition_eigen(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``lam, V, V^-1`` of ``T = V diag(lam) V^-1``."""
+        return self._transition_eigen
+
+    @property
+    def model_coefficients(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``F0, F1`` ``(M, n, n)`` and ``C`` ``(4, M, n, n)`` (see :meth:`models`)."""
+        return self._model_coefficients
+
+    @cached_property
+    def _rust(self) -> _core.ClassFilter:
+        """This filter's tables in the Rust core, made on first use."""
+        return rust.class_filter(self)
 
     @cached_property
     def _model_coefficients(self) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -149,6 +178,8 @@ class ClassFilter:
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Predict each object by its own ``dt`` (s). Objects with ``dt <= 0`` are left as
         they are: no time passes, so no mode transition either."""
+        if self.engine == "rust":
+            return rust.predict(self._rust, x, P, mu, dt)
         moving = dt > 0.0
         walk = self._random_walk
         if walk is not None:
@@ -215,20 +246,27 @@ class ClassFilter:
         self, x: FloatArray, P: FloatArray, mu: FloatArray, z: FloatArray, R: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Update with measured positions; see :func:`semwm.filters.batched.update`."""
+        if self.engine == "rust":
+            return rust.update(x, P, mu, z, R)
         return batched.update(x, P, mu, z, R)
 
     def combine(
         self, x: FloatArray, P: FloatArray, mu: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
         """Combined mean ``(N, n)`` and covariance ``(N, n, n)``."""
+        if self.engine == "rust":
+            return rust.combine(x, P, mu)
         return batched.combine(x, P, mu)
 
 
 class FilterFactory:
-    """Builds and caches each class's :class:`ClassFilter` and measurement noise."""
+    """Builds and caches each class's :class:`ClassFilter` and measurement noise, and runs
+    the filter steps that do not depend on the class (an update, the combined estimate,
+    the gate) with its ``engine``."""
 
-    def __init__(self, knowledge: Knowledge) -> None:
+    def __init__(self, knowledge: Knowledge, engine: Engine = "python") -> None:
         self.knowledge = knowledge
+        self.engine: Engine = engine
         self._filters: dict[str, ClassFilter] = {}
         self._noise: dict[tuple[str, str], FloatArray] = {}
 
@@ -239,9 +277,32 @@ class FilterFactory:
     def filter_for(self, class_name: str) -> ClassFilter:
         built = self._filters.get(class_name)
         if built is None:
-            built = build_class_filter(self.knowledge.classes[class_name], self.dim)
+            built = build_class_filter(self.knowledge.classes[class_name], self.dim, self.engine)
             self._filters[class_name] = built
         return built
+
+    def update(
+        self, x: FloatArray, P: FloatArray, mu: FloatArray, z: FloatArray, R: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The Kalman / IMM update of any filter shape (:func:`batched.update`)."""
+        if self.engine == "rust":
+            return rust.update(x, P, mu, z, R)
+        return batched.update(x, P, mu, z, R)
+
+    def combine(
+        self, x: FloatArray, P: FloatArray, mu: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """The combined estimate of any filter shape (:func:`batched.combine`)."""
+        if self.engine == "rust":
+            return rust.combine(x, P, mu)
+        return batched.combine(x, P, mu)
+
+    def mahalanobis_squared(self, residual: FloatArray, covariance: FloatArray) -> FloatArray:
+        """The gate's :math:`r^T C^{-1} r` of ``(K, d)`` residuals and ``(K, d, d)``
+        covariances (:func:`small.mahalanobis_squared`)."""
+        if self.engine == "rust":
+            return rust.mahalanobis_squared(residual, covariance)
+        return small.mahalanobis_squared(residual, covariance)
 
     def measurement_noise(self, class_name: str, detector: str) -> FloatArray:
         """R for a class seen by a detector: the detector's per-class noise if it sets one
@@ -266,8 +327,8 @@ class FilterFactory:
         return R
 
 
-def build_class_filter(resolved: ResolvedClass, dim: int) -> ClassFilter:
-    """Turn a resolved class into its filter (paper 002 IV-B)."""
+def build_class_filter(resolved: ResolvedClass, dim: int, engine: Engine = "python") -> ClassFilter:
+    """Turn a resolved class into its filter (paper 002 IV-B), run by ``engine``."""
     spec = resolved.filter
     if isinstance(spec, IMMFilterSpec):
         orders = tuple(m.motion_model for m in spec.models)
@@ -307,4 +368,5 @@ def build_class_filter(resolved: ResolvedClass, dim: int) -> ClassFilter:
         with_velocity=with_velocity,
         velocity_decay=resolved.velocity_decay if with_velocity else 0.0,
         transition_period=period,
+        engine=engine,
     )

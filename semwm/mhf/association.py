@@ -40,10 +40,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.special import chdtri
 
-from semwm.filters import batched
 from semwm.filters.factory import FilterFactory
 from semwm.filters.motion import FloatArray
-from semwm.filters.small import inverse_and_log_det, mahalanobis_squared, quadratic_form
+from semwm.filters.small import inverse_and_log_det, quadratic_form
 from semwm.knowledge.coverage import birth_volume, coverage_volume
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
@@ -436,7 +435,7 @@ class Associator:
             return found
         R_pair = R[jj] + self._timing_noise(predicted, measurements, jj, ii)
         S = predicted.position_covariance[ii] + R_pair
-        d2 = mahalanobis_squared(pair_diff, S)
+        d2 = self.factory.mahalanobis_squared(pair_diff, S)
         passed = d2 <= self.gate
         if labelled is not None:
             passed |= labelled[jj, ii]
@@ -460,11 +459,11 @@ class Associator:
             rows_j = jj[pairs]
             R_rows = R_pair[pairs]
             x, P, mu = predicted.stacked(rows_i)
-            x_new, P_new, mu_new, log_lik = batched.update(x, P, mu, z[rows_j], R_rows)
+            x_new, P_new, mu_new, log_lik = self.factory.update(x, P, mu, z[rows_j], R_rows)
             if self.model == "paper":
-                x_hat, _ = batched.combine(x_new, P_new, mu_new)
+                x_hat, _ = self.factory.combine(x_new, P_new, mu_new)
                 delta = z[rows_j] - x_hat[:, :d]
-                log_lik = -0.5 * mahalanobis_squared(delta, R_rows)
+                log_lik = -0.5 * self.factory.mahalanobis_squared(delta, R_rows)
             elif labelled is not None and labelled[rows_j, rows_i].any():
                 log_lik = self._label_robust(
                     log_lik, labelled[rows_j, rows_i], diff, rows_j, rows_i, predicted, R_rows

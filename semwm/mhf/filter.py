@@ -30,6 +30,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from semwm.filters.engine import Engine
 from semwm.filters.factory import FilterFactory
 from semwm.filters.motion import FloatArray
 from semwm.filters.small import largest_eigenvalue
@@ -117,10 +118,10 @@ class _TrackTable:
 class MultipleHypothesisFilter:
     """The MHF for one knowledge base."""
 
-    def __init__(self, knowledge: Knowledge) -> None:
+    def __init__(self, knowledge: Knowledge, engine: Engine = "python") -> None:
         self.knowledge = knowledge
         self.taxonomy = Taxonomy({name: c.parents for name, c in knowledge.classes.items()})
-        self.factory = FilterFactory(knowledge)
+        self.factory = FilterFactory(knowledge, engine)
         self.associator = Associator(knowledge, self.factory, self.taxonomy)
         self.ratio = knowledge.world.pruning_ratio
         self.log_ratio = math.log(self.ratio) if self.ratio > 0.0 else -math.inf

@@ -206,8 +206,8 @@ def test_a_read_token_guards_reads_and_health_details(sim1: Path) -> None:
     with server(sim1, token=TOKEN, read_token=READ) as client:
         assert client.get("/world").status_code == 401
         assert client.get("/health").json() == {
-            "status": "ok", "knowledge": None, "time": None, "hypotheses": None,
-            "objects": None, "commit": None, "hypotheses_log10_joint": None,
+            "status": "ok", "engine": None, "knowledge": None, "time": None,
+            "hypotheses": None, "objects": None, "commit": None, "hypotheses_log10_joint": None,
             "store_damage": None, "lost_records": None,
         }  # fmt: skip
         assert client.get("/ready").status_code == 200
@@ -215,6 +215,7 @@ def test_a_read_token_guards_reads_and_health_details(sim1: Path) -> None:
             headers = {"authorization": f"Bearer {token}"}
             assert client.get("/world", headers=headers).status_code == 200
             assert client.get("/health", headers=headers).json()["knowledge"] == str(sim1)
+            assert client.get("/health", headers=headers).json()["engine"] in ("python", "rust")
         read_only = {"authorization": f"Bearer {READ}"}
         assert client.post("/reset", headers=read_only).status_code == 401
 

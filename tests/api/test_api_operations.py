@@ -223,3 +223,37 @@ def test_docs_assets_stay_open_with_a_read_token(service: WorldService) -> None:
             assert guarded.get(asset).status_code == 200, asset
         assert guarded.get("/static/live.js").status_code == 200
         assert guarded.get("/metrics").status_code == 401
+
+
+def test_health_and_metrics_say_which_engine_runs(knowledge_file: Any, engine: str) -> None:
+    """``/health`` (to readers) and ``/metrics`` (``semwm_engine_info``) name the engine,
+    and the service serves the same world with either."""
+    import api_knowledge as knowledge_data
+
+    from semwm.world import WorldModel
+
+    model = WorldModel(
+        knowledge_data.knowledge(str(knowledge_file)), reorder_window=0.5, engine=engine
+    )
+    with TestClient(make_app(WorldService(model, knowledge_file))) as client:
+        for step in range(6):
+            assert (
+                client.post("/detections", json={"detections": scene(step * 0.5)}).status_code
+                == 200
+            )
+        assert client.get("/health").json()["engine"] == engine
+        samples = scrape(client)
+        assert value(samples, "semwm_engine_info", engine=engine) == 1.0
+        other = "python" if engine == "rust" else "rust"
+        assert value(samples, "semwm_engine_info", engine=other) == 0.0
+        assert len(client.get("/world").json()["objects"]) == 3
+
+
+def test_settings_take_the_engine_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    from api.settings import Settings
+
+    monkeypatch.setenv("SEMWM_ENGINE", " Rust")
+    assert Settings().engine == "rust"
+    monkeypatch.setenv("SEMWM_ENGINE", "numba")
+    with pytest.raises(ValueError, match="engine"):
+        Settings()

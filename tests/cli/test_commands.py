@@ -61,7 +61,21 @@ def test_every_command_help_is_current(
 def test_version(capsys: pytest.CaptureFixture[str]) -> None:
     status, out, _ = run(capsys, "--version")
     assert status == 0
-    assert out.strip() == f"semwm {metadata.version('semwm')}"
+    assert out.strip().startswith(f"semwm {metadata.version('semwm')} (engine: ")
+    from semwm.filters.engine import rust_core
+
+    built = "Rust core: built" if rust_core() is not None else "Rust core: not built"
+    assert built in out
+
+
+def test_version_says_the_engine(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("SEMWM_ENGINE", "python")
+    assert "(engine: python; " in run(capsys, "--version")[1]
+    monkeypatch.setenv("SEMWM_ENGINE", "fortran")
+    status, out, _ = run(capsys, "--version")
+    assert status == 0 and "engine: none: SEMWM_ENGINE: expected one of python, rust" in out
 
 
 BAD_VALUES = [

@@ -97,8 +97,8 @@ def _scenario(seed: int, model: str):
     return kb, scans
 
 
-def _ingest_all(kb, scans) -> WorldModel:
-    wm = WorldModel(kb)
+def _ingest_all(kb, scans, engine: str = "python") -> WorldModel:
+    wm = WorldModel(kb, engine=engine)
     for scan in scans:
         wm.ingest(
             [
@@ -111,9 +111,9 @@ def _ingest_all(kb, scans) -> WorldModel:
 
 @pytest.mark.parametrize("model", ["paper", "mht"])
 @pytest.mark.parametrize("seed", range(40))
-def test_same_hypotheses_as_reference(seed: int, model: str) -> None:
+def test_same_hypotheses_as_reference(seed: int, model: str, engine: str) -> None:
     kb, scans = _scenario(seed, model)
-    wm = _ingest_all(kb, scans)
+    wm = _ingest_all(kb, scans, engine)
     ref = run_reference(kb, scans)
     real, expected = real_hypotheses(wm), ref_hypotheses(ref)
     assert_same_hypotheses(real, expected)
@@ -188,9 +188,9 @@ def _door_scenario(seed: int, model: str):
 
 @pytest.mark.parametrize("model", ["paper", "mht"])
 @pytest.mark.parametrize("seed", range(25))
-def test_appearance_and_labels_as_reference(seed: int, model: str) -> None:
+def test_appearance_and_labels_as_reference(seed: int, model: str, engine: str) -> None:
     kb, scans = _door_scenario(seed, model)
-    wm = WorldModel(kb)
+    wm = WorldModel(kb, engine=engine)
     for scan in scans:
         wm.ingest(
             [

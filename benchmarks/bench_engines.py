@@ -1,0 +1,285 @@
+"""The Python engine and the Rust engine side by side (issue 29), in one run.
+
+For each case, both engines run the same scans in the same process, interleaved
+(python, rust, python, rust, ...) so that both see the same load on a shared machine:
+
+* the static grid (``bench_scaling``'s scenario) of N = 50 and N = 1,000 objects: CPU
+  ms per frame and µs per detection over the steady frames after a warm-up (mean
+  of the timed frames, best of ``--repeats`` runs);
+* sim2 and robocup (2 s), seed 0: CPU µs per detection and per scan of the whole run
+  (best of the repeats);
+* the share of the CPU time spent in the filters, the part in Rust so far
+  (``ClassFilter.predict``/``update``/``combine`` and the factory's ``update``,
+  ``combine`` and gate, cumulative, from one cProfile run of robocup per engine);
+* parity: every frame of sim1, sim2 and robocup (2 s) over ``--seeds`` seeds with both
+  engines: ids, classes and labels equal, and the largest difference of any published
+  number (positions, velocities, covariances, existence, mode and class probabilities).
+
+Writes ``engines.json`` and ``engines.md`` to ``benchmarks/out/``
+(``benchmarks/results/`` with ``--update-results``).
+
+    python benchmarks/bench_engines.py [--quick] [--repeats R] [--seeds S] [--update-results]
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import pstats
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from baselines import RESULTS, add_output_arguments, fmt, machine_info, write_results
+
+from semwm.detection import Detection
+from semwm.filters.engine import ENGINES, Engine, engine_description, rust_core
+from semwm.knowledge.loader import load_knowledge
+from semwm.knowledge.model import Knowledge
+from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.sim.runner import scans
+from semwm.sim.scenarios import make_scenario
+from semwm.world import WorldModel
+from semwm.world_types import WorldObject
+
+Scan = list[Detection]
+SCENARIOS: dict[str, dict[str, Any]] = {"sim2": {}, "robocup": {"duration": 2.0}}
+PARITY_SCENARIOS: dict[str, dict[str, Any]] = {"sim1": {}, **SCENARIOS}
+GRID_SIZES = (50, 1000)
+WARMUP, TIMED = 20, 30
+FILTER_FUNCTIONS = {
+    ("factory.py", "predict"),
+    ("factory.py", "update"),
+    ("factory.py", "combine"),
+    ("factory.py", "mahalanobis_squared"),
+}
+"""The entry points of what runs in Rust so far (semwm/filters/factory.py)."""
+
+
+def _with_region(knowledge: Knowledge, region: Any) -> Knowledge:
+    world = knowledge.world.model_copy(update={"region": tuple(tuple(r) for r in region)})
+    return knowledge.model_copy(update={"world": world})
+
+
+def _case(name: str, sizes: dict[str, Any], seed: int = 0) -> tuple[Knowledge, list[Scan]]:
+    scenario = make_scenario(name, seed, **sizes)
+    knowledge = load_knowledge(shipped_knowledge_path(scenario.knowledge_file))
+    if name == "grid":
+        knowledge = _with_region(knowledge, scenario.region)
+    return knowledge, list(scans(scenario.detections))
+
+
+def _cpu_per_scan(knowledge: Knowledge, all_scans: list[Scan], engine: Engine) -> list[float]:
+    """CPU seconds of each ingest call, one fresh world model."""
+    model = WorldModel(knowledge, reorder_window=0.0, engine=engine)
+    spent = []
+    for scan in all_scans:
+        start = time.process_time()
+        model.ingest(scan)
+        spent.append(time.process_time() - start)
+    return spent
+
+
+def _interleaved(
+    repeats: int, measure: Callable[[Engine], float], engines: tuple[Engine, ...]
+) -> dict[str, float]:
+    """The best (smallest) of ``repeats`` measures per engine, run in turn."""
+    best: dict[str, float] = {engine: float("inf") for engine in engines}
+    for _ in range(repeats):
+        for engine in engines:
+            best[engine] = min(best[engine], measure(engine))
+    return best
+
+
+def grid(n: int, repeats: int, engines: tuple[Engine, ...]) -> dict[str, Any]:
+    frames = WARMUP + TIMED
+    knowledge, all_scans = _case("grid", {"n_objects": n, "duration": (frames - 1) / 10.0})
+
+    def steady_ms(engine: Engine) -> float:
+        spent = _cpu_per_scan(knowledge, all_scans, engine)[WARMUP : WARMUP + TIMED]
+        return 1e3 * sum(spent) / len(spent)
+
+    per_frame = _interleaved(repeats, steady_ms, engines)
+    detections = sum(len(scan) for scan in all_scans[WARMUP : WARMUP + TIMED]) / TIMED
+    return {
+        "case": f"grid N = {n}",
+        "detections_per_frame": detections,
+        **{
+            engine: {"ms_per_frame": ms, "us_per_detection": 1e3 * ms / detections}
+            for engine, ms in per_frame.items()
+        },
+    }
+
+
+def scenario(name: str, repeats: int, engines: tuple[Engine, ...]) -> dict[str, Any]:
+    knowledge, all_scans = _case(name, SCENARIOS[name])
+    detections = sum(len(scan) for scan in all_scans)
+    total = _interleaved(
+        repeats, lambda engine: sum(_cpu_per_scan(knowledge, all_scans, engine)), engines
+    )
+    label = name + (f" {SCENARIOS[name]['duration']:g} s" if SCENARIOS[name] else "")
+    return {
+        "case": label,
+        "detections": detections,
+        "scans": len(all_scans),
+        **{
+            engine: {
+                "ms_per_frame": 1e3 * seconds / len(all_scans),
+                "us_per_detection": 1e6 * seconds / detections,
+            }
+            for engine, seconds in total.items()
+        },
+    }
+
+
+def filter_share(engines: tuple[Engine, ...]) -> dict[str, Any]:
+    """Share of robocup's ingest CPU time inside the filter entry points (cProfile)."""
+    knowledge, all_scans = _case("robocup", SCENARIOS["robocup"])
+    shares: dict[str, Any] = {}
+    for engine in engines:
+        model = WorldModel(knowledge, reorder_window=0.0, engine=engine)
+        profile = cProfile.Profile()
+        profile.enable()
+        for scan in all_scans:
+            model.ingest(scan)
+        profile.disable()
+        stats: dict[Any, Any] = pstats.Stats(profile).stats  # type: ignore[attr-defined]
+        total = sum(own for (_, _, own, _, _) in stats.values())
+        inside = sum(
+            cumulative
+            for (file, _, function), (_, _, _, cumulative, _) in stats.items()
+            if (Path(file).name, function) in FILTER_FUNCTIONS and "filters" in file
+        )
+        calls = sum(
+            primitive
+            for (file, _, function), (primitive, _, _, _, _) in stats.items()
+            if (Path(file).name, function) in FILTER_FUNCTIONS and "filters" in file
+        )
+        shares[engine] = {"filters_share": inside / total, "filter_calls": calls}
+    return shares
+
+
+def _numbers(obj: WorldObject) -> list[float]:
+    values = [*obj.position, *(obj.velocity or ()), *sum(obj.covariance, ()), obj.existence]
+    values += [*(obj.mode_probabilities or {}).values()]
+    values += [*(obj.class_probabilities or {}).values()]
+    return values
+
+
+def parity(seeds: int) -> dict[str, Any]:
+    """Frame by frame, both engines, every parity scenario and seed."""
+    result: dict[str, Any] = {}
+    for name, sizes in PARITY_SCENARIOS.items():
+        largest, frames, mismatched = 0.0, 0, 0
+        for seed in range(seeds):
+            knowledge, all_scans = _case(name, sizes, seed)
+            python = WorldModel(knowledge, engine="python")
+            rust = WorldModel(knowledge, engine="rust")
+            for scan in all_scans:
+                python.ingest(scan)
+                rust.ingest(scan)
+                expected = python.world(min_existence=1e-6).objects
+                got = rust.world(min_existence=1e-6).objects
+                frames += 1
+                if [(o.id, o.cls, o.label) for o in got] != [
+                    (o.id, o.cls, o.label) for o in expected
+                ]:
+                    mismatched += 1
+                    continue
+                for g, e in zip(got, expected, strict=True):
+                    a, b = _numbers(g), _numbers(e)
+                    if len(a) != len(b):
+                        mismatched += 1
+                        break
+                    largest = max([largest, *(abs(x - y) for x, y in zip(a, b, strict=True))])
+        result[name] = {
+            "seeds": seeds,
+            "frames": frames,
+            "mismatched_frames": mismatched,
+            "largest_difference": largest,
+        }
+    return result
+
+
+def run(quick: bool, repeats: int, seeds: int) -> dict[str, Any]:
+    if rust_core() is None:
+        raise SystemExit("bench_engines: semwm._core is not built (docs/engines.md)")
+    engines: tuple[Engine, ...] = ENGINES
+    cases = [grid(n, repeats, engines) for n in (GRID_SIZES[:1] if quick else GRID_SIZES)]
+    cases += [scenario(name, repeats, engines) for name in SCENARIOS]
+    for case in cases:
+        case["speedup"] = case["python"]["us_per_detection"] / case["rust"]["us_per_detection"]
+    return {
+        "machine": machine_info(),
+        "engines": {engine: engine_description(engine) for engine in engines},
+        "repeats": repeats,
+        "cases": cases,
+        "filter_share_robocup": filter_share(engines),
+        "parity": parity(seeds),
+    }
+
+
+def markdown(doc: dict[str, Any]) -> str:
+    machine = doc["machine"]
+    lines = [
+        "# The Python and the Rust engine (bench_engines.py)",
+        "",
+        f"{machine['date']}, {machine['processor']}, {machine['cpu_count']} cores, Python "
+        f"{machine['python']}; engines {', '.join(doc['engines'].values())}; CPU time, "
+        f"best of {doc['repeats']} interleaved runs.",
+        "",
+        "| case | detections / frame | Python µs/det | Rust µs/det | Python ms/frame "
+        "| Rust ms/frame | Python / Rust |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for case in doc["cases"]:
+        per_frame = case.get("detections_per_frame") or case["detections"] / case["scans"]
+        lines.append(
+            f"| {case['case']} | {fmt(per_frame, 4)} | {fmt(case['python']['us_per_detection'])} "
+            f"| {fmt(case['rust']['us_per_detection'])} | {fmt(case['python']['ms_per_frame'])} "
+            f"| {fmt(case['rust']['ms_per_frame'])} | {case['speedup']:.2f}x |"
+        )
+    share = doc["filter_share_robocup"]
+    lines += [
+        "",
+        "Share of robocup's ingest CPU time (cProfile) inside the filters, the part in "
+        "Rust so far: "
+        + ", ".join(
+            f"{engine} {100 * s['filters_share']:.1f} % ({s['filter_calls']} calls)"
+            for engine, s in share.items()
+        )
+        + ".",
+        "",
+        "| parity | seeds | frames | frames with other ids/classes | largest difference |",
+        "|---|---|---|---|---|",
+    ]
+    for name, p in doc["parity"].items():
+        lines.append(
+            f"| {name} | {p['seeds']} | {p['frames']} | {p['mismatched_frames']} "
+            f"| {p['largest_difference']:.2g} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="grid N = 50 only, 1 repeat")
+    parser.add_argument("--repeats", type=int, default=3, help="runs per engine (best kept)")
+    parser.add_argument("--seeds", type=int, default=5, help="seeds of the parity check")
+    add_output_arguments(parser)
+    args = parser.parse_args(argv)
+    repeats = 1 if args.quick else args.repeats
+    seeds = min(args.seeds, 2) if args.quick else args.seeds
+    doc = run(args.quick, repeats, seeds)
+    write_results(
+        RESULTS, "engines", doc, markdown(doc), args.quick, update_results=args.update_results
+    )
+    return doc
+
+
+if __name__ == "__main__":
+    main()

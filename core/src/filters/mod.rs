@@ -1,0 +1,6 @@
+//! Prediction and update, as `semwm/filters/`.
+
+pub mod batched;
+pub mod factory;
+pub mod motion;
+pub mod small;

@@ -1,0 +1,13 @@
+//! semwm-core: the numeric core of semwm's Multiple Hypothesis Filter, exposed to Python
+//! as `semwm._core` (see docs/engines.md).
+//!
+//! One module per role of the Python engine, named like it, each citing the equations the
+//! Python docstring cites: `filters::motion` (F(dt), Q(dt), the passive decay),
+//! `filters::batched` (IMM mixing, prediction, update, combination), `filters::small`
+//! (the small matrices: inverse, log determinant, the Mahalanobis gate) and
+//! `filters::factory` (one class's filter). The Python engine is the specification;
+//! the parity tests (tests/engines/) hold these kernels to it.
+
+pub mod error;
+pub mod filters;
+mod python;

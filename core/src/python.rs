@@ -1,0 +1,514 @@
+//! The Python module `semwm._core`: arrays in, arrays out.
+//!
+//! Every function copies its inputs into owned buffers (the arrays are small: a few
+//! doubles per object), releases the GIL for the numeric work (`Python::detach`, PyO3's
+//! `allow_threads`), and returns new numpy arrays. A kernel error becomes a Python
+//! exception with its message (`ValueError` for shapes, `numpy.linalg.LinAlgError` for a
+//! matrix that is not positive definite, as the Python engine raises); a panic, which
+//! the shape checks are there to rule out, is caught and raised as `RuntimeError`,
+//! never unwound into Python. No `unsafe` here.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use numpy::ndarray::{Array, Dimension, IntoDimension};
+use numpy::{
+    IntoPyArray, PyArray, PyArray1, PyArray2, PyArray3, PyArray4, PyArrayMethods, PyReadonlyArray1,
+    PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
+};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyType;
+
+use crate::error::{expect_shape, KernelError, KernelResult};
+use crate::filters::batched;
+use crate::filters::factory::{ClassTables, TransitionPeriod};
+use crate::filters::small;
+
+/// A kernel error as the Python exception the Python engine would raise.
+fn to_py_err(py: Python<'_>, error: KernelError) -> PyErr {
+    match error {
+        KernelError::Shape(message) => PyValueError::new_err(message),
+        KernelError::NotPositiveDefinite(message) | KernelError::Singular(message) => {
+            match py
+                .import("numpy.linalg")
+                .and_then(|module| module.getattr("LinAlgError"))
+                .and_then(|class| class.cast_into::<PyType>().map_err(PyErr::from))
+            {
+                Ok(class) => PyErr::from_type(class, message),
+                Err(import_error) => import_error,
+            }
+        }
+    }
+}
+
+/// Runs `work` without the GIL, with panics caught: the one way kernels are called.
+fn run<T: Send>(
+    py: Python<'_>,
+    name: &str,
+    work: impl FnOnce() -> KernelResult<T> + Send,
+) -> PyResult<T> {
+    let outcome = py.detach(|| catch_unwind(AssertUnwindSafe(work)));
+    match outcome {
+        Ok(Ok(value)) => Ok(value),
+        Ok(Err(error)) => Err(to_py_err(py, error)),
+        Err(panic) => {
+            let message = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "unknown panic".to_string());
+            Err(PyRuntimeError::new_err(format!(
+                "semwm._core.{name}: internal error (a bug, please report): {message}"
+            )))
+        }
+    }
+}
+
+/// An array's values in row-major order, with its shape.
+fn values<D: Dimension>(array: &Bound<'_, PyArray<f64, D>>) -> PyResult<(Vec<f64>, Vec<usize>)> {
+    let readonly = array.try_readonly()?;
+    let view = readonly.as_array();
+    Ok((view.iter().copied().collect(), view.shape().to_vec()))
+}
+
+fn to_numpy<'py, Sh: IntoDimension>(
+    py: Python<'py>,
+    shape: Sh,
+    data: Vec<f64>,
+) -> PyResult<Bound<'py, PyArray<f64, Sh::Dim>>> {
+    Array::from_shape_vec(shape, data)
+        .map(|array| array.into_pyarray(py))
+        .map_err(|error| PyRuntimeError::new_err(format!("semwm._core: result shape: {error}")))
+}
+
+/// The stacked states of `N` objects: `x` `(N, M, n)`, `P` `(N, M, n, n)`, `mu` `(N, M)`.
+struct States {
+    x: Vec<f64>,
+    p: Vec<f64>,
+    mu: Vec<f64>,
+    count: usize,
+    modes: usize,
+    state: usize,
+}
+
+impl States {
+    fn read(
+        x: &Bound<'_, PyArray3<f64>>,
+        p: &Bound<'_, PyArray4<f64>>,
+        mu: &Bound<'_, PyArray2<f64>>,
+    ) -> PyResult<Self> {
+        let (x, shape) = values(x)?;
+        let (count, modes, state) = (shape[0], shape[1], shape[2]);
+        let (p, p_shape) = values(p)?;
+        let (mu, mu_shape) = values(mu)?;
+        let check = || -> KernelResult<()> {
+            expect_shape("P", &p_shape, &[count, modes, state, state])?;
+            expect_shape("mu", &mu_shape, &[count, modes])?;
+            if modes == 0 || modes > batched::MAX_MODES || state == 0 || state > small::MAX_STATE {
+                return Err(KernelError::Shape(format!(
+                    "x: expected 1 to {} modes of 1 to {} state entries, got shape {shape:?}",
+                    batched::MAX_MODES,
+                    small::MAX_STATE
+                )));
+            }
+            Ok(())
+        };
+        check().map_err(PyValueError::new_err_from)?;
+        Ok(States {
+            x,
+            p,
+            mu,
+            count,
+            modes,
+            state,
+        })
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn into_numpy<'py>(
+        self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, PyArray3<f64>>,
+        Bound<'py, PyArray4<f64>>,
+        Bound<'py, PyArray2<f64>>,
+    )> {
+        let (n, m, s) = (self.count, self.modes, self.state);
+        Ok((
+            to_numpy(py, (n, m, s), self.x)?,
+            to_numpy(py, (n, m, s, s), self.p)?,
+            to_numpy(py, (n, m), self.mu)?,
+        ))
+    }
+}
+
+/// `ValueError` from a shape message.
+trait FromKernel {
+    fn new_err_from(error: KernelError) -> PyErr;
+}
+
+impl FromKernel for PyValueError {
+    fn new_err_from(error: KernelError) -> PyErr {
+        PyValueError::new_err(error.to_string())
+    }
+}
+
+/// `(period, lam, V, V_inv)` of a transition stated for a period.
+type PeriodArgs<'py> = (
+    f64,
+    PyReadonlyArray1<'py, f64>,
+    PyReadonlyArray2<'py, f64>,
+    PyReadonlyArray2<'py, f64>,
+);
+
+/// One class's filter: the numeric tables of `semwm.filters.factory.ClassFilter`, handed
+/// over once per class, and its batched prediction.
+#[pyclass(frozen, name = "ClassFilter", module = "semwm._core")]
+struct PyClassFilter {
+    tables: ClassTables,
+}
+
+#[pymethods]
+impl PyClassFilter {
+    /// `F0`, `F1` `(M, n, n)`; `C` `(4, M, n, n)`; `transition` `(M, M)`;
+    /// `first_order` `M` flags; `velocity_decay` (m/s^2); `period` (s) with the
+    /// eigen-decomposition `lam` `(M,)`, `V`, `V_inv` `(M, M)` of `transition`, or `None`.
+    #[new]
+    #[pyo3(signature = (dim, f0, f1, c, transition, first_order, velocity_decay, period=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        dim: usize,
+        f0: PyReadonlyArray3<'_, f64>,
+        f1: PyReadonlyArray3<'_, f64>,
+        c: PyReadonlyArray4<'_, f64>,
+        transition: PyReadonlyArray2<'_, f64>,
+        first_order: Vec<bool>,
+        velocity_decay: f64,
+        period: Option<PeriodArgs<'_>>,
+    ) -> PyResult<Self> {
+        let shape = f0.as_array().shape().to_vec();
+        if shape.len() != 3 || shape[1] != shape[2] {
+            return Err(PyValueError::new_err(format!(
+                "F0: expected shape (M, n, n), got {shape:?}"
+            )));
+        }
+        let flat = |array: ndarray_view::View<'_>| array.iter().copied().collect::<Vec<f64>>();
+        let tables = ClassTables {
+            dim,
+            modes: shape[0],
+            state: shape[1],
+            f0: flat(f0.as_array().into_dyn()),
+            f1: flat(f1.as_array().into_dyn()),
+            c: flat(c.as_array().into_dyn()),
+            transition: flat(transition.as_array().into_dyn()),
+            period: period.map(|(period, lam, v, v_inv)| TransitionPeriod {
+                period,
+                lam: flat(lam.as_array().into_dyn()),
+                v: flat(v.as_array().into_dyn()),
+                v_inv: flat(v_inv.as_array().into_dyn()),
+            }),
+            velocity_decay,
+            first_order,
+        };
+        tables.validate().map_err(PyValueError::new_err_from)?;
+        Ok(PyClassFilter { tables })
+    }
+
+    /// Predicts each object by its own `dt` (s): `ClassFilter.predict`. Returns new
+    /// `x`, `P`, `mu`.
+    #[allow(clippy::type_complexity)]
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyArray3<f64>>,
+        p: &Bound<'py, PyArray4<f64>>,
+        mu: &Bound<'py, PyArray2<f64>>,
+        dt: &Bound<'py, PyArray1<f64>>,
+    ) -> PyResult<(
+        Bound<'py, PyArray3<f64>>,
+        Bound<'py, PyArray4<f64>>,
+        Bound<'py, PyArray2<f64>>,
+    )> {
+        let mut states = States::read(x, p, mu)?;
+        let (dt, _) = values(dt)?;
+        let tables = &self.tables;
+        if (states.modes, states.state) != (tables.modes, tables.state) {
+            return Err(PyValueError::new_err(format!(
+                "x: expected (N, {}, {}) for this filter, got (N, {}, {})",
+                tables.modes, tables.state, states.modes, states.state
+            )));
+        }
+        if dt.len() != states.count {
+            return Err(PyValueError::new_err(format!(
+                "dt: expected {} time steps (one per object), got {}",
+                states.count,
+                dt.len()
+            )));
+        }
+        run(py, "ClassFilter.predict", || {
+            tables.predict(&mut states.x, &mut states.p, &mut states.mu, &dt)?;
+            Ok(states)
+        })?
+        .into_numpy(py)
+    }
+
+    #[getter]
+    fn modes(&self) -> usize {
+        self.tables.modes
+    }
+
+    #[getter]
+    fn state_size(&self) -> usize {
+        self.tables.state
+    }
+}
+
+/// IMM mixing (`semwm.filters.batched.imm_mix`): `T` `(M, M)` or `(N, M, M)`. Returns
+/// the mixed `x0`, `P0` and the predicted mode probabilities `cbar`.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn imm_mix<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyArray3<f64>>,
+    p: &Bound<'py, PyArray4<f64>>,
+    mu: &Bound<'py, PyArray2<f64>>,
+    t: &Bound<'py, PyAny>,
+) -> PyResult<(
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray4<f64>>,
+    Bound<'py, PyArray2<f64>>,
+)> {
+    let mut states = States::read(x, p, mu)?;
+    let (t, per_object) = transitions(t, states.count, states.modes)?;
+    run(py, "imm_mix", || {
+        let (m, n) = (states.modes, states.state);
+        let mut x0 = vec![0.0; m * n];
+        let mut p0 = vec![0.0; m * n * n];
+        let mut cbar = vec![0.0; m];
+        for i in 0..states.count {
+            let ti = if per_object {
+                &t[i * m * m..(i + 1) * m * m]
+            } else {
+                &t[..]
+            };
+            let (xs, ps, mus) = object(&mut states, i);
+            batched::imm_mix(xs, ps, mus, ti, m, n, &mut x0, &mut p0, &mut cbar);
+            xs.copy_from_slice(&x0);
+            ps.copy_from_slice(&p0);
+            mus.copy_from_slice(&cbar);
+        }
+        Ok(states)
+    })?
+    .into_numpy(py)
+}
+
+/// IMM prediction with given models (`semwm.filters.batched.predict`): `F`, `Q`
+/// `(N, M, n, n)`, `T` `(M, M)` or `(N, M, M)`.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn predict<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyArray3<f64>>,
+    p: &Bound<'py, PyArray4<f64>>,
+    mu: &Bound<'py, PyArray2<f64>>,
+    f: &Bound<'py, PyArray4<f64>>,
+    q: &Bound<'py, PyArray4<f64>>,
+    t: &Bound<'py, PyAny>,
+) -> PyResult<(
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray4<f64>>,
+    Bound<'py, PyArray2<f64>>,
+)> {
+    let mut states = States::read(x, p, mu)?;
+    let (m, n) = (states.modes, states.state);
+    let (f, f_shape) = values(f)?;
+    let (q, q_shape) = values(q)?;
+    let expected = [states.count, m, n, n];
+    expect_shape("F", &f_shape, &expected).map_err(PyValueError::new_err_from)?;
+    expect_shape("Q", &q_shape, &expected).map_err(PyValueError::new_err_from)?;
+    let (t, per_object) = transitions(t, states.count, m)?;
+    run(py, "predict", || {
+        let mnn = m * n * n;
+        let mut x0 = vec![0.0; m * n];
+        let mut p0 = vec![0.0; mnn];
+        let mut cbar = vec![0.0; m];
+        for i in 0..states.count {
+            let ti = if per_object {
+                &t[i * m * m..(i + 1) * m * m]
+            } else {
+                &t[..]
+            };
+            let (xs, ps, mus) = object(&mut states, i);
+            batched::imm_mix(xs, ps, mus, ti, m, n, &mut x0, &mut p0, &mut cbar);
+            let (fi, qi) = (&f[i * mnn..(i + 1) * mnn], &q[i * mnn..(i + 1) * mnn]);
+            batched::predict_modes(&mut x0, &mut p0, fi, qi, m, n);
+            xs.copy_from_slice(&x0);
+            ps.copy_from_slice(&p0);
+            mus.copy_from_slice(&cbar);
+        }
+        Ok(states)
+    })?
+    .into_numpy(py)
+}
+
+/// `T` as values, and whether it is one matrix per object.
+fn transitions(t: &Bound<'_, PyAny>, count: usize, modes: usize) -> PyResult<(Vec<f64>, bool)> {
+    if let Ok(one) = t.cast::<PyArray2<f64>>() {
+        let (values, shape) = values(one)?;
+        expect_shape("T", &shape, &[modes, modes]).map_err(PyValueError::new_err_from)?;
+        return Ok((values, false));
+    }
+    if let Ok(each) = t.cast::<PyArray3<f64>>() {
+        let (values, shape) = values(each)?;
+        expect_shape("T", &shape, &[count, modes, modes]).map_err(PyValueError::new_err_from)?;
+        return Ok((values, true));
+    }
+    Err(PyValueError::new_err(format!(
+        "T: expected a float64 array of shape ({modes}, {modes}) or ({count}, {modes}, {modes})"
+    )))
+}
+
+/// Object `i`'s `x`, `P`, `mu` slices.
+fn object(states: &mut States, i: usize) -> (&mut [f64], &mut [f64], &mut [f64]) {
+    let (m, n) = (states.modes, states.state);
+    (
+        &mut states.x[i * m * n..(i + 1) * m * n],
+        &mut states.p[i * m * n * n..(i + 1) * m * n * n],
+        &mut states.mu[i * m..(i + 1) * m],
+    )
+}
+
+/// IMM update (`semwm.filters.batched.update`): `z` `(N, d)`, `R` `(N, d, d)`. Returns
+/// the updated `x`, `P`, `mu` and the log likelihood `(N,)`.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn update<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyArray3<f64>>,
+    p: &Bound<'py, PyArray4<f64>>,
+    mu: &Bound<'py, PyArray2<f64>>,
+    z: &Bound<'py, PyArray2<f64>>,
+    r: &Bound<'py, PyArray3<f64>>,
+) -> PyResult<(
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray4<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<f64>>,
+)> {
+    let mut states = States::read(x, p, mu)?;
+    let (z, z_shape) = values(z)?;
+    let (r, r_shape) = values(r)?;
+    let count = states.count;
+    let d = z_shape.get(1).copied().unwrap_or(0);
+    let check = || -> KernelResult<()> {
+        expect_shape("z", &z_shape, &[count, d])?;
+        expect_shape("R", &r_shape, &[count, d, d])?;
+        if d == 0 || d > 3 || d > states.state {
+            return Err(KernelError::Shape(format!(
+                "z: expected 1 to min(3, n = {}) measured entries, got {d}",
+                states.state
+            )));
+        }
+        Ok(())
+    };
+    check().map_err(PyValueError::new_err_from)?;
+    let (states, log_lik) = run(py, "update", || {
+        let (m, n) = (states.modes, states.state);
+        let mut log_lik = vec![0.0; count];
+        for (i, value) in log_lik.iter_mut().enumerate() {
+            let (zi, ri) = (&z[i * d..(i + 1) * d], &r[i * d * d..(i + 1) * d * d]);
+            let (xs, ps, mus) = object(&mut states, i);
+            *value = batched::update(xs, ps, mus, zi, ri, m, n, d)?;
+        }
+        Ok((states, log_lik))
+    })?;
+    let (x, p, mu) = states.into_numpy(py)?;
+    Ok((x, p, mu, to_numpy(py, count, log_lik)?))
+}
+
+/// The IMM's combined estimate (`semwm.filters.batched.combine`): `(N, n)`, `(N, n, n)`.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn combine<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyArray3<f64>>,
+    p: &Bound<'py, PyArray4<f64>>,
+    mu: &Bound<'py, PyArray2<f64>>,
+) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray3<f64>>)> {
+    let states = States::read(x, p, mu)?;
+    let (count, m, n) = (states.count, states.modes, states.state);
+    let (x_hat, p_hat) = run(py, "combine", || {
+        let mut x_hat = vec![0.0; count * n];
+        let mut p_hat = vec![0.0; count * n * n];
+        for i in 0..count {
+            batched::combine(
+                &states.x[i * m * n..(i + 1) * m * n],
+                &states.p[i * m * n * n..(i + 1) * m * n * n],
+                &states.mu[i * m..(i + 1) * m],
+                m,
+                n,
+                &mut x_hat[i * n..(i + 1) * n],
+                &mut p_hat[i * n * n..(i + 1) * n * n],
+            );
+        }
+        Ok((x_hat, p_hat))
+    })?;
+    Ok((
+        to_numpy(py, (count, n), x_hat)?,
+        to_numpy(py, (count, n, n), p_hat)?,
+    ))
+}
+
+/// Squared Mahalanobis distances, the gate (`semwm.filters.small.mahalanobis_squared`):
+/// residuals `(K, d)` and covariances `(K, d, d)`; returns `(K,)`.
+#[pyfunction]
+fn mahalanobis_squared<'py>(
+    py: Python<'py>,
+    residual: &Bound<'py, PyArray2<f64>>,
+    covariance: &Bound<'py, PyArray3<f64>>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (r, r_shape) = values(residual)?;
+    let (c, c_shape) = values(covariance)?;
+    let (count, d) = (r_shape[0], r_shape[1]);
+    let check = || -> KernelResult<()> {
+        expect_shape("covariance", &c_shape, &[count, d, d])?;
+        if d == 0 || d > small::MAX_STATE {
+            return Err(KernelError::Shape(format!(
+                "residual: expected 1 to {} entries, got {d}",
+                small::MAX_STATE
+            )));
+        }
+        Ok(())
+    };
+    check().map_err(PyValueError::new_err_from)?;
+    let distances = run(py, "mahalanobis_squared", || {
+        (0..count)
+            .map(|i| {
+                small::mahalanobis_squared(
+                    &r[i * d..(i + 1) * d],
+                    &c[i * d * d..(i + 1) * d * d],
+                    d,
+                )
+            })
+            .collect::<KernelResult<Vec<f64>>>()
+    })?;
+    to_numpy(py, count, distances)
+}
+
+mod ndarray_view {
+    pub type View<'a> = numpy::ndarray::ArrayViewD<'a, f64>;
+}
+
+/// `semwm._core`: the Rust engine's kernels (see docs/engines.md).
+#[pymodule]
+#[pyo3(name = "_core")]
+fn semwm_core(module: &Bound<'_, PyModule>) -> PyResult<()> {
+    module.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    module.add_class::<PyClassFilter>()?;
+    module.add_function(wrap_pyfunction!(imm_mix, module)?)?;
+    module.add_function(wrap_pyfunction!(predict, module)?)?;
+    module.add_function(wrap_pyfunction!(update, module)?)?;
+    module.add_function(wrap_pyfunction!(combine, module)?)?;
+    module.add_function(wrap_pyfunction!(mahalanobis_squared, module)?)?;
+    Ok(())
+}

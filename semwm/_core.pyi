@@ -1,0 +1,38 @@
+"""Types of the Rust core ``semwm._core`` (built from ``core/``; docs/engines.md).
+
+Every function takes and returns float64 arrays with the shapes of its Python
+counterpart in :mod:`semwm.filters.batched` and :mod:`semwm.filters.small`, and raises
+``ValueError`` (shapes) or ``numpy.linalg.LinAlgError`` (a matrix that is not positive
+definite) as the Python engine does.
+"""
+
+import numpy as np
+from numpy.typing import NDArray
+
+_F = NDArray[np.float64]
+
+__version__: str
+
+class ClassFilter:
+    def __init__(
+        self,
+        dim: int,
+        f0: _F,
+        f1: _F,
+        c: _F,
+        transition: _F,
+        first_order: list[bool],
+        velocity_decay: float,
+        period: tuple[float, _F, _F, _F] | None = None,
+    ) -> None: ...
+    def predict(self, x: _F, p: _F, mu: _F, dt: _F, /) -> tuple[_F, _F, _F]: ...
+    @property
+    def modes(self) -> int: ...
+    @property
+    def state_size(self) -> int: ...
+
+def imm_mix(x: _F, p: _F, mu: _F, t: _F, /) -> tuple[_F, _F, _F]: ...
+def predict(x: _F, p: _F, mu: _F, f: _F, q: _F, t: _F, /) -> tuple[_F, _F, _F]: ...
+def update(x: _F, p: _F, mu: _F, z: _F, r: _F, /) -> tuple[_F, _F, _F, _F]: ...
+def combine(x: _F, p: _F, mu: _F, /) -> tuple[_F, _F]: ...
+def mahalanobis_squared(residual: _F, covariance: _F, /) -> _F: ...
