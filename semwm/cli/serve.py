@@ -7,7 +7,6 @@ line (or the core) does not import FastAPI.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import os
 import sys
 from pathlib import Path
