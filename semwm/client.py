@@ -2,7 +2,7 @@
 
 >>> with Client("http://127.0.0.1:8000", token="...") as client:   # doctest: +SKIP
 ...     client.post_detections([{"time": 12.3, "class": "Cup", "position": [1.0, 2.0]}])
-{'applied': 1, 'time': 12.3, 'ignored': 0}
+{'applied': 1, 'time': 12.3, 'ignored': 0, 'ignored_detections': []}
 
 >>> sync = ClockSync("http://127.0.0.1:8000", "robot1")       # doctest: +SKIP
 >>> sync.exchange()          # one round trip; the service updates its estimate

@@ -25,7 +25,7 @@ def batch(bad: dict[str, Any], at: int = 3, size: int = 5) -> dict[str, Any]:
 def test_single_detection_is_applied(client: TestClient) -> None:
     response = client.post("/detections", json=OK)
     assert response.status_code == 200
-    assert response.json() == {"applied": 1, "time": 3.0, "ignored": 0}
+    assert response.json() == {"applied": 1, "time": 3.0, "ignored": 0, "ignored_detections": []}
     assert client.get("/health").json()["time"] == 3.0
 
 

@@ -140,7 +140,7 @@ def test_the_event_loop_answers_while_a_batch_is_applied(service: WorldService) 
         poster.join()
     assert health.status_code == 200
     assert posted[0].status_code == 200, posted[0].text
-    assert posted[0].json() == {"applied": 2, "time": 3.0, "ignored": 0}
+    assert posted[0].json() == {"applied": 2, "time": 3.0, "ignored": 0, "ignored_detections": []}
     assert posted[0].headers["x-semwm-commit"] == "1"
 
 

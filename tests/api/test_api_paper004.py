@@ -40,7 +40,7 @@ def test_an_empty_scan_with_a_pose_is_negative_information(client: TestClient) -
     before = existence(client, 3.0)
     response = client.post("/detections", json={"detections": [], "sensor": SENSOR})
     assert response.status_code == 200, response.text
-    assert response.json() == {"applied": 0, "time": 3.0, "ignored": 0}
+    assert response.json() == {"applied": 0, "time": 3.0, "ignored": 0, "ignored_detections": []}
     after = existence(client, 3.0)
     assert after["Cup"] < before["Cup"] - 0.01  # 2.2 m away: inside the lidar's 5 m
     assert abs(after["Can"] - before["Can"]) < 1e-12  # 12 m away: outside

@@ -20,7 +20,7 @@ def test_requests_share_one_connection_and_refusals_carry_the_field_paths(
     knowledge_file: Path,
 ) -> None:
     with running_server(Settings(knowledge=knowledge_file, port=0)) as url, Client(url) as client:
-        assert client.post_detections([cup(1.0)]) == {"applied": 1, "time": 1.0, "ignored": 0}
+        assert client.post_detections([cup(1.0)]) == {"applied": 1, "time": 1.0, "ignored": 0, "ignored_detections": []}
         connection = client._connection
         assert client.post_detections([cup(1.1), cup(1.1, 3.0)])["applied"] == 2
         assert client.last_headers["x-semwm-commit"] == "2"
