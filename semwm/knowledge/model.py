@@ -374,6 +374,15 @@ class DetectorSpec(Frozen):
     confidence
         Paper 004: the confidence a detection of this detector gives the object it
         updates (a teammate's relayed estimate: lower than one's own camera).
+    static
+        The sensor stands still and sees the whole region (with ``position`` and
+        ``range``: what lies within ``range`` of ``position``): every scan of it
+        could have seen every object there, so not reporting one is a miss, as for a
+        scan with a sensor view (docs/knowledge.md, "What semwm concludes from not
+        seeing something"). Without it, a sensor's coverage is learnt from what it
+        reports.
+    position
+        Where a ``static`` sensor stands (m), for its ``range``.
     """
 
     name: Name
@@ -384,6 +393,8 @@ class DetectorSpec(Frozen):
     confusion_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.05
     unrelated_confusion_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.01
     confidence: Probability = 1.0
+    static: bool = False
+    position: tuple[Coordinate, ...] | None = None
 
 
 class KnownObject(Frozen):

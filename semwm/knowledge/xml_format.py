@@ -130,6 +130,8 @@ _DETECTOR_ATTRIBUTES = (
     "confusion_rate",
     "unrelated_confusion_rate",
     "confidence",
+    "static",
+    "position",
 )
 _KNOWN_OBJECT_ATTRIBUTES = ("class", "name")
 _SEPARATORS = re.compile(r"[\s,]+")
@@ -516,7 +518,10 @@ class _Reader:
             if name in element.attrib:
                 self.record((*path, name), self.attribute_line(element, name))
                 raw = str(element.attrib[name])
-                detector[name] = raw if name == "name" else _number_or_text(raw)
+                if name == "position":  # "x y" or "x y z", like <position> elements
+                    detector[name] = [_number_or_text(v) for v in _SEPARATORS.split(raw.strip())]
+                else:
+                    detector[name] = raw if name == "name" else _number_or_text(raw)
         parts = self.children(element, ("measurement_noise",), path, ("measurement_noise",))
         if "measurement_noise" in parts:
             noises: dict[str, Any] = {}
@@ -688,7 +693,13 @@ def document_to_xml(document: KnowledgeDocument) -> str:
         }
         for name in _DETECTOR_ATTRIBUTES[2:]:
             value = getattr(detector, name)
-            if value is not None and name in detector.model_fields_set:
+            if value is None or name not in detector.model_fields_set:
+                continue
+            if isinstance(value, bool):
+                attributes[name] = "true" if value else "false"
+            elif isinstance(value, tuple):
+                attributes[name] = " ".join(_format_number(v) for v in value)
+            else:
                 attributes[name] = _format_number(value)
         element = _add(root, "detector", **attributes)
         for cls, matrix in detector.measurement_noise.items():

@@ -383,15 +383,21 @@ class MultipleHypothesisFilter:
         """What the scan (no sensor view) tells about where its source looked."""
         first = measurements[0]
         detectors = self.knowledge.detectors
-        ranges = [detectors[d].range for d in {m.detector for m in measurements}]
+        used = [detectors[d] for d in {m.detector for m in measurements}]
+        ranges = [d.range for d in used]
         reach = (
             max(r for r in ranges if r is not None) if all(r is not None for r in ranges) else None
         )
+        fixed = all(d.static for d in used)
+        sensor = first.sensor
+        if fixed and sensor is None and len(used) == 1 and used[0].position is not None:
+            sensor = np.asarray(used[0].position, dtype=float)
         return ScanCoverage(
             first.source or "",
             np.array([m.z for m in measurements], dtype=float),
-            first.sensor,
+            sensor,
             reach,
+            fixed,
         )
 
     def _settleable(self, clusters: Sequence[Cluster]) -> dict[int, float] | None:

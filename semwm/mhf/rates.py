@@ -93,14 +93,17 @@ class ScanCoverage:
 
     ``source``: its source (``""`` for none); ``positions`` ``(M, d)``: its
     detections' positions; ``sensor``: where its sensor was (the detections'
-    ``sensor_position``), if given; ``reach``: the largest ``range`` of its
-    detectors, if every one of them has one.
+    ``sensor_position``, or a static detector's ``position``), if given; ``reach``:
+    the largest ``range`` of its detectors, if every one of them has one;
+    ``fixed``: every detector of the scan is ``static`` (it sees the whole region, or
+    ``reach`` around ``sensor``).
     """
 
     source: str
     positions: FloatArray
     sensor: FloatArray | None = None
     reach: float | None = None
+    fixed: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -184,6 +187,9 @@ class ObservedRates:
 
         * The scan gave its sensor's position and every detector of it has a
           ``range``: the objects within that range of the sensor.
+        * Every detector of the scan is declared ``static`` in the knowledge (fixed
+          coverage): every object (the region's inside probability weighs it in
+          :meth:`~semwm.mhf.filter.MultipleHypothesisFilter.miss_rates`).
         * Otherwise the source's coverage is learnt from what it reports: an object
           the source has itself detected (``sources``: each object version's
           :attr:`~semwm.mhf.state.Track.sources`), and either near what this scan
@@ -205,6 +211,8 @@ class ObservedRates:
                 np.einsum("nd,nd->n", offset, offset) <= scan.reach * scan.reach
             )
             return inside
+        if scan.fixed:
+            return np.ones(count, dtype=bool)
         source = scan.source
         by_source = np.fromiter((source in s for s in sources), dtype=bool, count=count)
         if not by_source.any():
