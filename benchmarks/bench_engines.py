@@ -8,6 +8,10 @@ For each case, both engines run the same scans in the same process, interleaved
   of the timed frames, best of ``--repeats`` runs);
 * sim2 and robocup (2 s), seed 0: CPU µs per detection and per scan of the whole run
   (best of the repeats);
+* the kernels alone: one ``ClassFilter.predict`` and one ``update`` of N objects
+  (robocup.yaml's ``Robot``, a 2-mode IMM with a transition period, 2-D) for N = 1,
+  10, 100, 1,000: µs per call (best of ``--repeats`` loops), what crossing to Rust
+  costs and gains per call;
 * the share of the CPU time spent in the filters, the part in Rust so far
   (``ClassFilter.predict``/``update``/``combine`` and the factory's ``update``,
   ``combine`` and gate, cumulative, from one cProfile run of robocup per engine);
@@ -136,6 +140,46 @@ def scenario(name: str, repeats: int, engines: tuple[Engine, ...]) -> dict[str, 
     }
 
 
+KERNEL_SIZES = (1, 10, 100, 1000)
+
+
+def kernels(repeats: int, engines: tuple[Engine, ...]) -> list[dict[str, Any]]:
+    """µs per predict and per update call of N IMM objects, each engine."""
+    import numpy as np
+
+    from semwm.filters.factory import FilterFactory
+
+    knowledge = load_knowledge(shipped_knowledge_path("robocup.yaml"))
+    rows = []
+    for n in KERNEL_SIZES:
+        rng = np.random.default_rng(n)
+        row: dict[str, Any] = {"n": n}
+        for engine in engines:
+            flt = FilterFactory(knowledge, engine).filter_for("Robot")
+            x, P, mu = flt.initial_states(rng.normal(size=(n, flt.dim)))
+            dt = rng.uniform(0.01, 0.2, size=n)
+            z = rng.normal(size=(n, flt.dim))
+            R = np.repeat(np.eye(flt.dim)[None] * 0.01, n, axis=0)
+            loops = max(3, 3000 // n)
+
+            def per_call(call: Callable[[], object], loops: int = loops) -> float:
+                best = float("inf")
+                for _ in range(repeats):
+                    start = time.perf_counter()
+                    for _ in range(loops):
+                        call()
+                    best = min(best, (time.perf_counter() - start) / loops)
+                return 1e6 * best
+
+            xp, Pp, mup = flt.predict(x, P, mu, dt)
+            row[engine] = {
+                "predict_us": per_call(lambda: flt.predict(x, P, mu, dt)),  # noqa: B023
+                "update_us": per_call(lambda: flt.update(xp, Pp, mup, z, R)),  # noqa: B023
+            }
+        rows.append(row)
+    return rows
+
+
 def filter_share(engines: tuple[Engine, ...]) -> dict[str, Any]:
     """Share of robocup's ingest CPU time inside the filter entry points (cProfile)."""
     knowledge, all_scans = _case("robocup", SCENARIOS["robocup"])
@@ -218,6 +262,7 @@ def run(quick: bool, repeats: int, seeds: int) -> dict[str, Any]:
         "engines": {engine: engine_description(engine) for engine in engines},
         "repeats": repeats,
         "cases": cases,
+        "kernels": kernels(repeats, engines),
         "filter_share_robocup": filter_share(engines),
         "parity": parity(seeds),
     }
@@ -242,6 +287,21 @@ def markdown(doc: dict[str, Any]) -> str:
             f"| {case['case']} | {fmt(per_frame, 4)} | {fmt(case['python']['us_per_detection'])} "
             f"| {fmt(case['rust']['us_per_detection'])} | {fmt(case['python']['ms_per_frame'])} "
             f"| {fmt(case['rust']['ms_per_frame'])} | {case['speedup']:.2f}x |"
+        )
+    lines += [
+        "",
+        "The kernels alone, µs per call (robocup's Robot: IMM, 2 modes, 4 states, 2-D):",
+        "",
+        "| N objects | predict Python | predict Rust | ratio | update Python "
+        "| update Rust | ratio |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in doc.get("kernels", []):
+        p, r = row["python"], row["rust"]
+        lines.append(
+            f"| {row['n']} | {fmt(p['predict_us'])} | {fmt(r['predict_us'])} "
+            f"| {p['predict_us'] / r['predict_us']:.1f}x | {fmt(p['update_us'])} "
+            f"| {fmt(r['update_us'])} | {p['update_us'] / r['update_us']:.1f}x |"
         )
     share = doc["filter_share_robocup"]
     lines += [

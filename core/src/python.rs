@@ -10,7 +10,7 @@
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-use numpy::ndarray::{Array, Dimension, IntoDimension};
+use numpy::ndarray::{Array, ArrayView, Dimension, IntoDimension};
 use numpy::{
     IntoPyArray, PyArray, PyArray1, PyArray2, PyArray3, PyArray4, PyArrayMethods, PyReadonlyArray1,
     PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
@@ -71,6 +71,11 @@ fn values<D: Dimension>(array: &Bound<'_, PyArray<f64, D>>) -> PyResult<(Vec<f64
     Ok((view.iter().copied().collect(), view.shape().to_vec()))
 }
 
+/// A read-only array's values in row-major order.
+fn flat<D: Dimension>(array: ArrayView<'_, f64, D>) -> Vec<f64> {
+    array.iter().copied().collect()
+}
+
 fn to_numpy<'py, Sh: IntoDimension>(
     py: Python<'py>,
     shape: Sh,
@@ -113,7 +118,7 @@ impl States {
             }
             Ok(())
         };
-        check().map_err(PyValueError::new_err_from)?;
+        check().map_err(shape_error)?;
         Ok(States {
             x,
             p,
@@ -142,15 +147,9 @@ impl States {
     }
 }
 
-/// `ValueError` from a shape message.
-trait FromKernel {
-    fn new_err_from(error: KernelError) -> PyErr;
-}
-
-impl FromKernel for PyValueError {
-    fn new_err_from(error: KernelError) -> PyErr {
-        PyValueError::new_err(error.to_string())
-    }
+/// `ValueError` from a shape check (the arguments are checked before any work).
+fn shape_error(error: KernelError) -> PyErr {
+    PyValueError::new_err(error.to_string())
 }
 
 /// `(period, lam, V, V_inv)` of a transition stated for a period.
@@ -192,25 +191,24 @@ impl PyClassFilter {
                 "F0: expected shape (M, n, n), got {shape:?}"
             )));
         }
-        let flat = |array: ndarray_view::View<'_>| array.iter().copied().collect::<Vec<f64>>();
         let tables = ClassTables {
             dim,
             modes: shape[0],
             state: shape[1],
-            f0: flat(f0.as_array().into_dyn()),
-            f1: flat(f1.as_array().into_dyn()),
-            c: flat(c.as_array().into_dyn()),
-            transition: flat(transition.as_array().into_dyn()),
+            f0: flat(f0.as_array()),
+            f1: flat(f1.as_array()),
+            c: flat(c.as_array()),
+            transition: flat(transition.as_array()),
             period: period.map(|(period, lam, v, v_inv)| TransitionPeriod {
                 period,
-                lam: flat(lam.as_array().into_dyn()),
-                v: flat(v.as_array().into_dyn()),
-                v_inv: flat(v_inv.as_array().into_dyn()),
+                lam: flat(lam.as_array()),
+                v: flat(v.as_array()),
+                v_inv: flat(v_inv.as_array()),
             }),
             velocity_decay,
             first_order,
         };
-        tables.validate().map_err(PyValueError::new_err_from)?;
+        tables.validate().map_err(shape_error)?;
         Ok(PyClassFilter { tables })
     }
 
@@ -324,8 +322,8 @@ fn predict<'py>(
     let (f, f_shape) = values(f)?;
     let (q, q_shape) = values(q)?;
     let expected = [states.count, m, n, n];
-    expect_shape("F", &f_shape, &expected).map_err(PyValueError::new_err_from)?;
-    expect_shape("Q", &q_shape, &expected).map_err(PyValueError::new_err_from)?;
+    expect_shape("F", &f_shape, &expected).map_err(shape_error)?;
+    expect_shape("Q", &q_shape, &expected).map_err(shape_error)?;
     let (t, per_object) = transitions(t, states.count, m)?;
     run(py, "predict", || {
         let mnn = m * n * n;
@@ -355,12 +353,12 @@ fn predict<'py>(
 fn transitions(t: &Bound<'_, PyAny>, count: usize, modes: usize) -> PyResult<(Vec<f64>, bool)> {
     if let Ok(one) = t.cast::<PyArray2<f64>>() {
         let (values, shape) = values(one)?;
-        expect_shape("T", &shape, &[modes, modes]).map_err(PyValueError::new_err_from)?;
+        expect_shape("T", &shape, &[modes, modes]).map_err(shape_error)?;
         return Ok((values, false));
     }
     if let Ok(each) = t.cast::<PyArray3<f64>>() {
         let (values, shape) = values(each)?;
-        expect_shape("T", &shape, &[count, modes, modes]).map_err(PyValueError::new_err_from)?;
+        expect_shape("T", &shape, &[count, modes, modes]).map_err(shape_error)?;
         return Ok((values, true));
     }
     Err(PyValueError::new_err(format!(
@@ -411,7 +409,7 @@ fn update<'py>(
         }
         Ok(())
     };
-    check().map_err(PyValueError::new_err_from)?;
+    check().map_err(shape_error)?;
     let (states, log_lik) = run(py, "update", || {
         let (m, n) = (states.modes, states.state);
         let mut log_lik = vec![0.0; count];
@@ -480,7 +478,7 @@ fn mahalanobis_squared<'py>(
         }
         Ok(())
     };
-    check().map_err(PyValueError::new_err_from)?;
+    check().map_err(shape_error)?;
     let distances = run(py, "mahalanobis_squared", || {
         (0..count)
             .map(|i| {
@@ -493,10 +491,6 @@ fn mahalanobis_squared<'py>(
             .collect::<KernelResult<Vec<f64>>>()
     })?;
     to_numpy(py, count, distances)
-}
-
-mod ndarray_view {
-    pub type View<'a> = numpy::ndarray::ArrayViewD<'a, f64>;
 }
 
 /// `semwm._core`: the Rust engine's kernels (see docs/engines.md).

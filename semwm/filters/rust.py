@@ -6,7 +6,8 @@ Same arguments, shapes and results as the numpy functions (the parity tests in
 object per track. :func:`class_filter` hands the core a class's numeric tables once
 (``F(dt) = F0 + dt F1``, ``Q(dt)`` as a polynomial, the mode transition and its
 eigen-decomposition, the passive decay): knowledge and validation stay in Python.
-Import this module only when :func:`semwm.filters.engine.rust_core` is not ``None``.
+Importing it is safe without the extension; calling it then raises
+:class:`~semwm.filters.engine.EngineUnavailable`.
 """
 
 from __future__ import annotations

@@ -166,3 +166,22 @@ def test_errors_are_python_exceptions_with_messages(rust) -> None:  # type: igno
         from semwm import _core
 
         _core.combine(x.astype(np.float32), P, mu)
+
+
+def test_class_filter_tables_are_checked() -> None:
+    from semwm import _core
+
+    eye = np.eye(2)[None]
+    zero = np.zeros((1, 2, 2))
+    C = np.zeros((4, 1, 2, 2))
+    one = np.ones((1, 1))
+    with pytest.raises(ValueError, match="n = dim or 2 dim, got dim 3, n 2"):
+        _core.ClassFilter(3, eye, zero, C, one, [False], 0.0)
+    with pytest.raises(ValueError, match="C: expected 16 values, got 12"):
+        _core.ClassFilter(2, eye, zero, C[:3], one, [False], 0.0)
+    flt = _core.ClassFilter(2, eye, zero, C, one, [False], 0.0)
+    x, P, mu = np.zeros((2, 1, 2)), np.repeat(eye[None], 2, axis=0), np.ones((2, 1))
+    with pytest.raises(ValueError, match="dt: expected 2 time steps"):
+        flt.predict(x, P, mu, np.ones(3))
+    with pytest.raises(ValueError, match=r"x: expected \(N, 1, 2\) for this filter"):
+        flt.predict(np.zeros((2, 1, 4)), np.zeros((2, 1, 4, 4)), mu, np.ones(2))

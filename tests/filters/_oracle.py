@@ -15,6 +15,7 @@ from filterpy.common import Q_continuous_white_noise
 from filterpy.kalman import IMMEstimator, KalmanFilter
 from numpy.typing import NDArray
 
+from semwm.filters.engine import Engine
 from semwm.filters.factory import ClassFilter, FilterFactory
 from semwm.knowledge.model import (
     ClassSpec,
@@ -220,8 +221,9 @@ def _matrix(a: FloatArray) -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(float(v) for v in row) for row in a)
 
 
-def class_filter(s: Scenario) -> ClassFilter:
-    """The scenario's filter built by the factory from a resolved KnowledgeDocument."""
+def class_filter(s: Scenario, engine: Engine = "python") -> ClassFilter:
+    """The scenario's filter built by the factory from a resolved KnowledgeDocument,
+    run by ``engine``."""
     if s.kind == "imm":
         spec: KalmanFilterSpec | IMMFilterSpec = IMMFilterSpec(
             models=(
@@ -251,4 +253,4 @@ def class_filter(s: Scenario) -> ClassFilter:
         ),
         detectors=(DetectorSpec(name="camera", clutter_frequency=0.1, range=10.0),),
     )
-    return FilterFactory(resolve(document)).filter_for("Thing")
+    return FilterFactory(resolve(document), engine).filter_for("Thing")

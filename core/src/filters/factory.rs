@@ -51,9 +51,10 @@ impl ClassTables {
     /// Checks the tables' sizes against each other.
     pub fn validate(&self) -> KernelResult<()> {
         let (m, n, d) = (self.modes, self.state, self.dim);
-        if !(1..=3).contains(&d) || !(1..=MAX_STATE).contains(&n) || n < d {
+        // the state is the position, or the position and the velocity
+        if !(1..=3).contains(&d) || (n != d && n != 2 * d) || n > MAX_STATE {
             return Err(KernelError::Shape(format!(
-                "dim and state size: expected 1 <= dim <= 3 and dim <= n <= {MAX_STATE}, got dim {d}, n {n}"
+                "dim and state size: expected 1 <= dim <= 3 and n = dim or 2 dim, got dim {d}, n {n}"
             )));
         }
         if !(1..=MAX_MODES).contains(&m) {
@@ -296,6 +297,10 @@ mod tests {
             error,
             KernelError::Shape("F1: expected 4 values, got 3".to_string())
         );
+        let mut odd = constant_velocity(1.0);
+        odd.dim = 3; // n = 2 is neither dim nor 2 dim
+        let error = odd.validate().unwrap_err();
+        assert!(matches!(error, KernelError::Shape(m) if m.starts_with("dim and state size")));
         let tables = constant_velocity(1.0);
         let error = tables
             .predict(&mut [0.0; 3], &mut [0.0; 4], &mut [1.0], &[1.0])
