@@ -202,8 +202,9 @@ class MultipleHypothesisFilter:
 
     def region_margins(self, tracks: Sequence[Track]) -> FloatArray:
         """``(N, d)``: each object's region margin (:func:`region_margins`), from its
-        class's measurement noise for the default detector (zero for a class since
-        removed)."""
+        class's measurement noise for the default detector; zero for a class whose
+        filter has a velocity (it leaves by crossing the edge) and for a class since
+        removed."""
         dim = self.factory.dim
         if not tracks:
             return np.zeros((0, dim))
@@ -212,7 +213,14 @@ class MultipleHypothesisFilter:
         for t in tracks:
             row = margins.get(t.cls)
             if row is None:
-                if t.cls in self.knowledge.classes:
+                # a class that moves (its filter has a velocity) crosses the region's
+                # edge by entering and leaving; a static one sits on it (a table top
+                # on the region's floor, a shelf on its wall): only its edge is soft
+                moves = (
+                    t.cls in self.knowledge.classes
+                    and self.factory.filter_for(t.cls).state_size > dim
+                )
+                if t.cls in self.knowledge.classes and not moves:
                     R = self.factory.measurement_noise(t.cls, self.knowledge.default_detector)
                     p = self.knowledge.world.gate_probability
                     row = region_margins(R[None, :dim, :dim], p)[0]

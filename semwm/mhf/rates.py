@@ -171,7 +171,9 @@ class ObservedRates:
         if clock is None or time <= clock.last_time:
             return 0.0
         step = time - clock.last_time
-        return step if clock.interval is None else min(step, MAX_MISS_INTERVALS * clock.interval)
+        if clock.interval is None:
+            return step
+        return min(step, MAX_MISS_INTERVALS * clock.interval)
 
     def watched(
         self,
