@@ -31,6 +31,8 @@ from semwm.cli.common import CommandError, require
 from semwm.knowledge import Knowledge, KnowledgeError, load_knowledge
 from semwm.persistence.records import ReadReport, Record, RecordError, batch_parts
 from semwm.persistence.replay import Replayer, model_digest
+from semwm.ros2.classmap import ClassMapError
+from semwm.ros2.read import BagError
 
 
 def _paced(records: Iterator[Record], speed: float | None) -> Iterator[Record]:
@@ -203,6 +205,10 @@ def _start_recorder(path: Path, replayer: Replayer) -> Any:
     return recorder
 
 
+ROS2_ERRORS = (BagError, ClassMapError)
+"""A bag or class map that cannot be used as asked: one line, like a missing file."""
+
+
 def _message(error: Exception) -> str:
     """An error as one line: ``FILE: no such file`` rather than ``[Errno 2] ...``."""
     if isinstance(error, OSError) and error.filename is not None:
@@ -246,7 +252,7 @@ def replay_command(args: argparse.Namespace) -> int:
             ros2=ros2,
             ros2_out=ros2_out,
         )
-    except (FileNotFoundError, KnowledgeError, RecordError, ImportError, ValueError) as error:
+    except (FileNotFoundError, KnowledgeError, RecordError, ImportError, *ROS2_ERRORS) as error:
         print(f"semwm replay: {_message(error)}", file=sys.stderr)
         return 2
     _summary("replay", out, metrics)
@@ -269,7 +275,7 @@ def record_command(args: argparse.Namespace) -> int:
             ros2=ros2,
             ros2_out=ros2_out,
         )
-    except (FileNotFoundError, KnowledgeError, RecordError, ImportError, ValueError) as error:
+    except (FileNotFoundError, KnowledgeError, RecordError, ImportError, *ROS2_ERRORS) as error:
         print(f"semwm record: {_message(error)}", file=sys.stderr)
         return 2
     _summary("record", out, metrics)

@@ -413,3 +413,16 @@ def test_ros2_out_does_not_overwrite(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert status == 2
     assert "exists already; not overwriting it" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_semwm_record_of_a_bag_replays_to_the_same_world(tmp_path: Path) -> None:
+    bag = good_bag(tmp_path / "robot_bag")
+    recording = tmp_path / "robot.mcap"
+    status = main(["record", str(bag), str(recording), "--ros2-detections", "/detections",
+                   "--knowledge", str(SIM1), "--ros2-out", str(tmp_path / "world_bag"),
+                   "--no-progress"])  # fmt: skip
+    assert status == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["robot.mcap", "robot_bag", "world_bag"]
+    assert main(["replay", str(recording), "--out", str(tmp_path / "out"), "--no-progress"]) == 0
+    lines = (tmp_path / "out" / "world.jsonl").read_text().splitlines()
+    assert json.loads(lines[-1]) == direct_world(bag)
