@@ -58,3 +58,17 @@ def test_the_hypotheses_example_is_what_semwm_gives() -> None:
     assert (new.id, new.track) == (None, 1)
     section = API_MD[API_MD.index("### Hypotheses") : API_MD.index("### Confidence and existence")]
     assert "probability 0.98" in section and "(0.02)" in section and "(existence 0.04)" in section
+
+
+def test_the_readme_names_only_routes_the_service_has() -> None:
+    import re
+
+    app = create_app(Settings(knowledge=shipped_knowledge_path("sim1.yaml")))
+    routes = {*app.openapi()["paths"], "/", "/docs", "/redoc"}
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    named = set(re.findall(r"`(?:GET |POST |PUT )?(/[a-z_/{}A-Z]*)[`?]", readme))
+    named |= set(re.findall(r"localhost:8000(/[a-z_/]+)", readme))
+    assert named, "the README names no route"
+    patterns = [re.compile(re.sub(r"\{[^}]+\}", "[^/]+", r.rstrip("/")) + "/?") for r in routes]
+    missing = sorted(path for path in named if not any(p.fullmatch(path) for p in patterns))
+    assert missing == [], f"README names routes the service has not: {missing}"
