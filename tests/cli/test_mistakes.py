@@ -185,3 +185,16 @@ def test_replay_of_a_ros2_bag_without_the_ros2_extra(folder: Path) -> None:
     )
     assert_clean(result, 'reading a ROS 2 bag needs rosbags: pip install "semwm[ros2]"')
     assert not (folder / "r").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--data-dir", "warehouse.yaml"], "--data-dir warehouse.yaml: exists and is not a folder"),
+        (["--record", "nothere/x.mcap"], "--record nothere/x.mcap: no such folder nothere/"),
+    ],
+)
+def test_serve_paths_that_cannot_be_used(folder: Path, argv: list[str], message: str) -> None:
+    result = semwm(folder, "serve", "--knowledge", "warehouse.yaml", "--port", "0", *argv)
+    assert_clean(result, f"semwm serve: {message}")
+    assert not (folder / "nothere").exists()
