@@ -38,6 +38,28 @@ def test_every_field_of_the_answers_is_described(openapi: dict[str, object], sch
         assert "lineage" in properties["track"]["description"]
 
 
+def test_every_answer_semwm_defines_describes_its_fields(openapi: dict[str, object]) -> None:
+    """Every property of every response schema of semwm's own (not FastAPI's
+    HTTPValidationError, nor the knowledge document: docs/knowledge.md)."""
+    schemas = openapi["components"]["schemas"]  # type: ignore[index]
+    answers = set()
+    for operations in openapi["paths"].values():  # type: ignore[attr-defined]
+        for operation in operations.values():
+            for response in operation.get("responses", {}).values():
+                schema = response.get("content", {}).get("application/json", {}).get("schema", {})
+                for ref in [schema.get("$ref"), *[s.get("$ref") for s in schema.get("anyOf", [])]]:
+                    if ref:
+                        answers.add(ref.split("/")[-1])
+    answers -= {"HTTPValidationError", "KnowledgeDocument"}
+    assert {"WorldOut", "HypothesesOut", "HealthOut", "SourcesOut"} <= answers
+    undescribed = {
+        name: [key for key, field in schemas[name].get("properties", {}).items()
+               if "description" not in field]
+        for name in sorted(answers)
+    }  # fmt: skip
+    assert {name: keys for name, keys in undescribed.items() if keys} == {}
+
+
 def test_the_hypotheses_table_names_every_field() -> None:
     section = API_MD[API_MD.index("### Hypotheses") : API_MD.index("### Confidence and existence")]
     for field in ("`id`", "`track`", "`class`, `label`", "`position`", "`existence`"):
