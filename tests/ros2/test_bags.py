@@ -404,6 +404,19 @@ def test_the_world_written_as_ros2_detection3d_arrays_reads_back(tmp_path: Path)
             covariance = np.asarray(best.pose.covariance).reshape(6, 6)
             assert covariance[:2, :2] == pytest.approx(np.asarray(o["covariance"]))
     assert any(message.detections for _, message in messages)
+    # as ROS 2 tools and Foxglove expect it: a rosbag2 folder whose MCAP file has a
+    # ros2msg schema and CDR messages (read here with the mcap library)
+    from mcap.reader import make_reader
+
+    (mcap_file,) = out_bag.glob("*.mcap")
+    assert (out_bag / "metadata.yaml").is_file()
+    with mcap_file.open("rb") as handle:
+        summary = make_reader(handle).get_summary()
+    assert summary is not None
+    (schema,) = summary.schemas.values()
+    (channel,) = summary.channels.values()
+    assert (schema.name, schema.encoding) == ("vision_msgs/msg/Detection3DArray", "ros2msg")
+    assert (channel.topic, channel.message_encoding) == ("/semwm/world", "cdr")
 
 
 def test_ros2_out_does_not_overwrite(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
