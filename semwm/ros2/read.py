@@ -101,14 +101,14 @@ def bag_records(
         dimension = knowledge.world.dimension
         yield config_record(reorder_window)
         newest = -math.inf
-        for connection, _, raw in reader.messages(connections):
+        for connection, log_ns, raw in reader.messages(connections):
             try:
                 message = reader.deserialize(raw, connection.msgtype)
             except Exception:  # a damaged message: counted, the rest is read
                 report.undecodable += 1
                 continue
             report.messages += 1
-            stamp = stamp_seconds(message.header.stamp)
+            stamp = stamp_seconds(message.header.stamp) or 1e-9 * log_ns
             if stamp < newest:
                 report.out_of_order += 1
                 report.most_late = max(report.most_late, newest - stamp)
@@ -121,6 +121,7 @@ def bag_records(
                 dimension,
                 report,
                 poses.at if poses is not None else None,
+                1e-9 * log_ns,
             )
             if detections:
                 yield batch_record(detections)

@@ -439,3 +439,22 @@ def test_semwm_record_of_a_bag_replays_to_the_same_world(tmp_path: Path) -> None
     assert main(["replay", str(recording), "--out", str(tmp_path / "out"), "--no-progress"]) == 0
     lines = (tmp_path / "out" / "world.jsonl").read_text().splitlines()
     assert json.loads(lines[-1]) == direct_world(bag)
+
+
+def test_arrays_without_a_stamp_take_the_log_time(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    messages = [
+        (t, array3d(0.0, "camera", [detection3d(0.0, "camera", [result("Cup", 0.9, CUP, VAR)])]))
+        for t in scan_times(10)
+    ]
+    bag = write_bag(
+        tmp_path / "bag", {"/detections": ("vision_msgs/msg/Detection3DArray", messages)}
+    )
+    status, metrics, worlds = replay(bag, tmp_path / "out")
+    assert status == 0
+    assert metrics["ros2"]["no_stamp"] == 10
+    assert worlds[-1]["time"] == pytest.approx(scan_times(10)[-1], abs=1e-6)
+    assert (
+        "10 messages without a header stamp (0): the bag's log time used" in capsys.readouterr().out
+    )
