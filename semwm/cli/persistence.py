@@ -32,7 +32,7 @@ from semwm.knowledge import Knowledge, KnowledgeError, load_knowledge
 from semwm.persistence.records import ReadReport, Record, RecordError, batch_parts
 from semwm.persistence.replay import Replayer, model_digest
 from semwm.ros2.classmap import ClassMapError
-from semwm.ros2.read import BagError
+from semwm.ros2.read import BagError, ros2_topics
 
 
 def _paced(records: Iterator[Record], speed: float | None) -> Iterator[Record]:
@@ -231,6 +231,12 @@ def _ros2_options(args: argparse.Namespace) -> tuple[Ros2Input | None, Path | No
         raise CommandError("--ros2-pose and --class-map go with --ros2-detections TOPIC")
     else:
         _require_mcap(args.source, "replaying an MCAP file")
+        topics = ros2_topics(Path(args.source))
+        if topics is not None:
+            raise CommandError(
+                f"{args.source} is a ROS 2 bag ({', '.join(topics)}): pass --ros2-detections "
+                "TOPIC and --knowledge FILE (docs/ros2.md)"
+            )
     ros2_out = Path(args.ros2_out) if args.ros2_out else None
     if ros2_out is not None:
         require("ros2", "--ros2-out")

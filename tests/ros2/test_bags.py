@@ -458,3 +458,17 @@ def test_arrays_without_a_stamp_take_the_log_time(
     assert (
         "10 messages without a header stamp (0): the bag's log time used" in capsys.readouterr().out
     )
+
+
+@pytest.mark.parametrize("as_file", [False, True], ids=["folder", "mcap file"])
+def test_a_bag_given_without_ros2_detections_says_what_it_holds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], as_file: bool
+) -> None:
+    bag = good_bag(tmp_path / "bag")
+    source = next(bag.glob("*.mcap")) if as_file else bag
+    status = main(["replay", str(source), "--out", str(tmp_path / "out"), "--no-progress"])
+    assert status == 2
+    err = capsys.readouterr().err
+    assert f"{source} is a ROS 2 bag (/detections (vision_msgs/msg/Detection3DArray))" in err
+    assert "pass --ros2-detections TOPIC and --knowledge FILE" in err
+    assert not (tmp_path / "out").exists()
