@@ -77,7 +77,7 @@ def run_replay(
     report = ReadReport()
     bag_report = None
     if ros2 is None:
-        records = open_records(source, report)
+        records = _primed(open_records(source, report))
     else:
         if knowledge is None:
             raise CommandError("a ROS 2 bag carries no knowledge: pass --knowledge FILE")
@@ -180,8 +180,14 @@ def _bag_records(
     records = bag_records(
         Path(source), ros2.detections, knowledge, bag_report, class_map, ros2.pose
     )
-    first = next(records)
-    return itertools.chain([first], records), bag_report
+    return _primed(records), bag_report
+
+
+def _primed(records: Iterator[Record]) -> Iterator[Record]:
+    """``records`` with the first one read now: a source that cannot be read fails
+    here, before anything is written (no empty output folder left behind)."""
+    first = next(records, None)
+    return records if first is None else itertools.chain([first], records)
 
 
 def _write_world(handle: TextIO, world: dict[str, Any]) -> None:

@@ -157,6 +157,7 @@ def test_serve_setting_mistakes_name_the_option(
         (["serve", "--knowledge", "nothere.yaml"], "semwm serve: nothere.yaml: no such file"),
         (["replay", "nothere.jsonl", "--out", "r"], "nothere.jsonl: No such file or directory"),
         (["replay", "nothere", "--out", "r"], "nothere: no such file or directory, and not a"),
+        (["replay", "nothere.mcap"], "nothere.mcap: No such file or directory"),
         (
             ["simulate", "sim1", "--knowledge", "nothere.yaml"],
             "semwm simulate: nothere.yaml: No such file or directory",
@@ -167,6 +168,7 @@ def test_missing_files_are_one_line(folder: Path, argv: list[str], message: str)
     result = semwm(folder, *argv)
     assert_clean(result, message)
     assert "[Errno" not in result.stderr
+    assert sorted(p.name for p in folder.iterdir()) == ["broken.yaml", "warehouse.yaml"]
 
 
 def test_help_lists_every_scenario(folder: Path) -> None:
