@@ -27,7 +27,7 @@ from typing import Any, TextIO
 import numpy as np
 from tqdm import tqdm
 
-from semwm.cli.common import CommandError, require
+from semwm.cli.common import CommandError, positive_float, require
 from semwm.knowledge import Knowledge, KnowledgeError, load_knowledge
 from semwm.persistence.records import ReadReport, Record, RecordError, batch_parts
 from semwm.persistence.replay import Replayer, model_digest
@@ -139,6 +139,7 @@ def run_replay(
         "refused_actions": counts.refused_actions,
         "skipped_knowledge_changes": counts.skipped_knowledge,
         "tail_problem": report.problem,
+        "first_refusal": counts.first_refusal,
         "objects_at_end": len(replayer.model.world().objects) if replayer.model else 0,
         "digest": model_digest(replayer.model) if replayer.model else None,
         "time_per_detection": {
@@ -248,6 +249,8 @@ def _ros2_options(args: argparse.Namespace) -> tuple[Ros2Input | None, Path | No
         require("ros2", "--ros2-out")
         if ros2_out.exists():
             raise CommandError(f"--ros2-out {ros2_out}: exists already; not overwriting it")
+        if not ros2_out.parent.is_dir():
+            raise CommandError(f"--ros2-out {ros2_out}: no such folder {ros2_out.parent}/")
     return ros2, ros2_out
 
 
@@ -304,6 +307,8 @@ def _summary(what: str, out: Path | None, metrics: dict[str, Any]) -> None:
     )
     if metrics["tail_problem"]:
         print(f"warning: {metrics['tail_problem']}")
+    if metrics["first_refusal"]:
+        print(f"warning: the first refused batch: {metrics['first_refusal']}")
     if "ros2" in metrics:
         ros2 = metrics["ros2"]
         print(
@@ -389,7 +394,7 @@ def add_replay_command(subparsers: Any) -> argparse.ArgumentParser:
     )
     _common(parser)
     parser.add_argument(
-        "--speed", type=float, help="times real time (default: as fast as possible)"
+        "--speed", type=positive_float, help="times real time (default: as fast as possible)"
     )
     parser.add_argument("--out", help="output directory (default runs/replay-NAME)")
     parser.set_defaults(func=replay_command)

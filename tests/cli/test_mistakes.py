@@ -200,3 +200,27 @@ def test_serve_paths_that_cannot_be_used(folder: Path, argv: list[str], message:
     result = semwm(folder, "serve", "--knowledge", "warehouse.yaml", "--port", "0", *argv)
     assert_clean(result, f"semwm serve: {message}")
     assert not (folder / "nothere").exists()
+
+
+def test_replay_into_knowledge_that_refuses_everything_says_why(folder: Path) -> None:
+    result = semwm(folder, "replay", "sim1", "--knowledge", "warehouse.yaml", "--out", "r",
+                   "--no-progress")  # fmt: skip
+    assert result.returncode == 0 and "Traceback" not in result.stderr
+    assert "0 batches, 0 detections, 51 refused" in result.stdout
+    assert (
+        "warning: the first refused batch: 0.class: unknown class 'Cup'; known classes: Thing; "
+        "1.class: unknown class 'CokeCan'; known classes: Thing (and 2 more)"
+    ) in result.stdout
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--speed", "-1"], "argument --speed: expected a number > 0, found '-1'"),
+        (["--ros2-out", "nothere/bag"], "--ros2-out nothere/bag: no such folder nothere/"),
+    ],
+)
+def test_replay_option_mistakes(folder: Path, argv: list[str], message: str) -> None:
+    result = semwm(folder, "replay", "sim1", "--out", "r", "--no-progress", *argv)
+    assert_clean(result, message)
+    assert sorted(p.name for p in folder.iterdir()) == ["broken.yaml", "warehouse.yaml"]
