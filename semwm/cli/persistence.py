@@ -92,39 +92,41 @@ def run_replay(
     seconds: list[float] = []
     sizes: list[int] = []
     recorder = None
-    with (
-        (
-            (out / "world.jsonl").open("w", encoding="utf-8")
-            if out is not None
-            else contextlib.nullcontext(None)
-        ) as worlds,
-        tqdm(disable=not progress, desc=f"replay {source}", unit="rec", leave=False) as bar,
-    ):
-        for record in _paced(records, speed):
-            start = clock.perf_counter()
-            result = replayer.apply(record)
-            elapsed = clock.perf_counter() - start
-            bar.update(1)
-            if recorder is None and recorder_path is not None and replayer.model is not None:
-                recorder = _start_recorder(recorder_path, replayer)  # writes config, knowledge
-            elif recorder is not None and (record.kind != "knowledge" or knowledge is None):
-                recorder.write_change(record)
-            if record.kind != "batch" or result is None:
-                continue
-            seconds.append(elapsed)
-            sizes.append(len(batch_parts(record.payload)[0]))
-            assert replayer.model is not None
-            state = replayer.model.world()
-            if worlds is not None:
-                _write_world(worlds, state.to_dict())
-            if recorder is not None:
-                recorder.write_world(state)
-            if world_bag is not None:
-                world_bag.write(state)
-    if recorder is not None:
-        recorder.close()
-    if world_bag is not None:
-        world_bag.close()
+    try:
+        with (
+            (
+                (out / "world.jsonl").open("w", encoding="utf-8")
+                if out is not None
+                else contextlib.nullcontext(None)
+            ) as worlds,
+            tqdm(disable=not progress, desc=f"replay {source}", unit="rec", leave=False) as bar,
+        ):
+            for record in _paced(records, speed):
+                start = clock.perf_counter()
+                result = replayer.apply(record)
+                elapsed = clock.perf_counter() - start
+                bar.update(1)
+                if recorder is None and recorder_path is not None and replayer.model is not None:
+                    recorder = _start_recorder(recorder_path, replayer)  # writes config, knowledge
+                elif recorder is not None and (record.kind != "knowledge" or knowledge is None):
+                    recorder.write_change(record)
+                if record.kind != "batch" or result is None:
+                    continue
+                seconds.append(elapsed)
+                sizes.append(len(batch_parts(record.payload)[0]))
+                assert replayer.model is not None
+                state = replayer.model.world()
+                if worlds is not None:
+                    _write_world(worlds, state.to_dict())
+                if recorder is not None:
+                    recorder.write_world(state)
+                if world_bag is not None:
+                    world_bag.write(state)
+    finally:  # a recording cut short (Ctrl-C) is still a readable file
+        if recorder is not None:
+            recorder.close()
+        if world_bag is not None:
+            world_bag.close()
     counts = replayer.counts
     per = np.asarray(seconds) / np.maximum(np.asarray(sizes), 1) if seconds else np.zeros(1)
     metrics: dict[str, Any] = {
