@@ -301,7 +301,9 @@ class WorldOut(BaseModel):
     )
 
     time: float | None = Field(description="The time the objects are predicted to (s).")
-    objects: list[WorldObjectOut]
+    objects: list[WorldObjectOut] = Field(
+        description="every object whose existence is at least min_existence (0.5 unless asked)"
+    )
 
 
 class HypothesisObjectOut(BaseModel):
@@ -336,7 +338,7 @@ class HypothesisOut(BaseModel):
     log10_probability: float = Field(
         description="log10 of the probability (exact where the probability rounds to 0)"
     )
-    objects: list[HypothesisObjectOut]
+    objects: list[HypothesisObjectOut] = Field(description="the objects this hypothesis holds")
 
 
 class HypothesesOut(BaseModel):
@@ -349,15 +351,17 @@ class HypothesesOut(BaseModel):
     log10_joint: float = Field(
         description="log10 of the number of global hypotheses (combinations of the clusters')."
     )
-    hypotheses: list[HypothesisOut]
+    hypotheses: list[HypothesisOut] = Field(description="the most probable ones, best first")
 
 
 class ClassOut(BaseModel):
     """A class: as resolved (inheritance applied) and as written."""
 
-    name: str
-    resolved: ResolvedClass
-    spec: ClassSpec
+    name: str = Field(description="the class's name")
+    resolved: ResolvedClass = Field(
+        description="its settings with inheritance applied (what the world model uses)"
+    )
+    spec: ClassSpec = Field(description="its settings as written in the knowledge")
     written: bool = Field(
         default=False, description="PUT only: whether the edit was written to the knowledge file."
     )
@@ -366,15 +370,15 @@ class ClassOut(BaseModel):
 class ReloadOut(BaseModel):
     """The knowledge reloaded from its file."""
 
-    knowledge: str
-    classes: list[str]
+    knowledge: str = Field(description="the knowledge file read")
+    classes: list[str] = Field(description="its classes")
 
 
 class ResetOut(BaseModel):
     """The world after a reset."""
 
-    status: str = "reset"
-    time: float | None
+    status: str = Field(default="reset", description="always 'reset'")
+    time: float | None = Field(description="the world's time after the reset: null (empty)")
 
 
 class HealthOut(BaseModel):
@@ -396,7 +400,7 @@ class HealthOut(BaseModel):
         }
     )
 
-    status: str = "ok"
+    status: str = Field(default="ok", description="'ok' while the process answers (liveness)")
     engine: Literal["python", "rust"] | None = Field(
         default=None,
         description="Readers only: who runs the world model's numeric kernels (docs/engines.md).",
@@ -426,35 +430,35 @@ class HealthOut(BaseModel):
 class ReadyOut(BaseModel):
     """Readiness: ``ready``, or ``not ready`` with the reasons."""
 
-    status: str
-    reasons: list[str]
+    status: str = Field(description="'ready', or 'not ready' (with status code 503)")
+    reasons: list[str] = Field(description="why not ready; empty when ready")
 
 
 class ErrorItem(BaseModel):
     """One problem with a request: where (``loc``) and what (``msg``)."""
 
-    loc: list[str | int]
-    msg: str
-    type: str
+    loc: list[str | int] = Field(description="where: the path of the field in the request")
+    msg: str = Field(description="what is wrong")
+    type: str = Field(description="the kind of problem (pydantic's error type)")
 
 
 class ValidationErrorOut(BaseModel):
     """422: every problem found; nothing was changed."""
 
-    detail: list[ErrorItem]
+    detail: list[ErrorItem] = Field(description="every problem, each with where and what")
 
 
 class MessageOut(BaseModel):
     """An error with a message (404, 409)."""
 
-    detail: str
+    detail: str = Field(description="what was not found or is in conflict")
 
 
 class KnowledgeFileErrorOut(BaseModel):
     """422 of ``POST /knowledge/reload``: the problems of the file, ``FILE:LINE: message``."""
 
-    detail: str
-    problems: list[str]
+    detail: str = Field(description="the file could not be used; the running knowledge stays")
+    problems: list[str] = Field(description="every problem, as FILE:LINE: message")
 
 
 def ingest_out(result: IngestResult) -> IngestOut:

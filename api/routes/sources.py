@@ -46,21 +46,21 @@ class SyncIn(BaseModel):
 class SyncReplyOut(BaseModel):
     """The service's half of an exchange (service clock, s)."""
 
-    sent: float
-    received: float
-    replied: float
+    sent: float = Field(description="t1: when the source sent the request, by its clock (s)")
+    received: float = Field(description="t2: when the service received it (s)")
+    replied: float = Field(description="t3: when the service answered (s)")
 
 
 class SourceOut(BaseModel):
     """One source: its clock offset (service clock = source clock + offset) and counts."""
 
-    name: str | None
-    synced: bool
+    name: str | None = Field(description="the source's name; null for detections without one")
+    synced: bool = Field(description="whether at least one sync exchange has been made")
     clock_offset: float | None = Field(description="service clock minus source clock (s)")
     offset_std: float | None = Field(description="standard uncertainty of the offset (s)")
     delay: float | None = Field(description="smallest round-trip delay kept (s)")
-    exchanges: int
-    detections: int
+    exchanges: int = Field(description="sync exchanges made (kept or not)")
+    detections: int = Field(description="detections accepted from it")
     last_time: float | None = Field(description="latest accepted time, service clock (s)")
     late: int = Field(description="detections refused as older than the reorder window")
     refused: int = Field(description="detections refused by a time guard")
@@ -77,7 +77,9 @@ class SourceOut(BaseModel):
 
 
 class SourcesOut(BaseModel):
-    sources: list[SourceOut]
+    """Every source seen, with its clock and counts."""
+
+    sources: list[SourceOut] = Field(description="one per source, by name (the nameless one first)")
 
 
 @router.post(

@@ -27,10 +27,12 @@ from typing import Any, TextIO
 import numpy as np
 from tqdm import tqdm
 
-from semwm.cli.common import CommandError, require
+from semwm.cli.common import CommandError, positive_float, require
 from semwm.knowledge import Knowledge, KnowledgeError, load_knowledge
 from semwm.persistence.records import ReadReport, Record, RecordError, batch_parts
 from semwm.persistence.replay import Replayer, model_digest
+from semwm.ros2.classmap import ClassMapError
+from semwm.ros2.read import BagError, ros2_topics
 
 
 def _paced(records: Iterator[Record], speed: float | None) -> Iterator[Record]:
@@ -75,7 +77,7 @@ def run_replay(
     report = ReadReport()
     bag_report = None
     if ros2 is None:
-        records = open_records(source, report)
+        records = _primed(open_records(source, report))
     else:
         if knowledge is None:
             raise CommandError("a ROS 2 bag carries no knowledge: pass --knowledge FILE")
@@ -90,39 +92,41 @@ def run_replay(
     seconds: list[float] = []
     sizes: list[int] = []
     recorder = None
-    with (
-        (
-            (out / "world.jsonl").open("w", encoding="utf-8")
-            if out is not None
-            else contextlib.nullcontext(None)
-        ) as worlds,
-        tqdm(disable=not progress, desc=f"replay {source}", unit="rec", leave=False) as bar,
-    ):
-        for record in _paced(records, speed):
-            start = clock.perf_counter()
-            result = replayer.apply(record)
-            elapsed = clock.perf_counter() - start
-            bar.update(1)
-            if recorder is None and recorder_path is not None and replayer.model is not None:
-                recorder = _start_recorder(recorder_path, replayer)  # writes config, knowledge
-            elif recorder is not None and (record.kind != "knowledge" or knowledge is None):
-                recorder.write_change(record)
-            if record.kind != "batch" or result is None:
-                continue
-            seconds.append(elapsed)
-            sizes.append(len(batch_parts(record.payload)[0]))
-            assert replayer.model is not None
-            state = replayer.model.world()
-            if worlds is not None:
-                _write_world(worlds, state.to_dict())
-            if recorder is not None:
-                recorder.write_world(state)
-            if world_bag is not None:
-                world_bag.write(state)
-    if recorder is not None:
-        recorder.close()
-    if world_bag is not None:
-        world_bag.close()
+    try:
+        with (
+            (
+                (out / "world.jsonl").open("w", encoding="utf-8")
+                if out is not None
+                else contextlib.nullcontext(None)
+            ) as worlds,
+            tqdm(disable=not progress, desc=f"replay {source}", unit="rec", leave=False) as bar,
+        ):
+            for record in _paced(records, speed):
+                start = clock.perf_counter()
+                result = replayer.apply(record)
+                elapsed = clock.perf_counter() - start
+                bar.update(1)
+                if recorder is None and recorder_path is not None and replayer.model is not None:
+                    recorder = _start_recorder(recorder_path, replayer)  # writes config, knowledge
+                elif recorder is not None and (record.kind != "knowledge" or knowledge is None):
+                    recorder.write_change(record)
+                if record.kind != "batch" or result is None:
+                    continue
+                seconds.append(elapsed)
+                sizes.append(len(batch_parts(record.payload)[0]))
+                assert replayer.model is not None
+                state = replayer.model.world()
+                if worlds is not None:
+                    _write_world(worlds, state.to_dict())
+                if recorder is not None:
+                    recorder.write_world(state)
+                if world_bag is not None:
+                    world_bag.write(state)
+    finally:  # a recording cut short (Ctrl-C) is still a readable file
+        if recorder is not None:
+            recorder.close()
+        if world_bag is not None:
+            world_bag.close()
     counts = replayer.counts
     per = np.asarray(seconds) / np.maximum(np.asarray(sizes), 1) if seconds else np.zeros(1)
     metrics: dict[str, Any] = {
@@ -137,6 +141,7 @@ def run_replay(
         "refused_actions": counts.refused_actions,
         "skipped_knowledge_changes": counts.skipped_knowledge,
         "tail_problem": report.problem,
+        "first_refusal": counts.first_refusal,
         "objects_at_end": len(replayer.model.world().objects) if replayer.model else 0,
         "digest": model_digest(replayer.model) if replayer.model else None,
         "time_per_detection": {
@@ -178,8 +183,14 @@ def _bag_records(
     records = bag_records(
         Path(source), ros2.detections, knowledge, bag_report, class_map, ros2.pose
     )
-    first = next(records)
-    return itertools.chain([first], records), bag_report
+    return _primed(records), bag_report
+
+
+def _primed(records: Iterator[Record]) -> Iterator[Record]:
+    """``records`` with the first one read now: a source that cannot be read fails
+    here, before anything is written (no empty output folder left behind)."""
+    first = next(records, None)
+    return records if first is None else itertools.chain([first], records)
 
 
 def _write_world(handle: TextIO, world: dict[str, Any]) -> None:
@@ -201,6 +212,10 @@ def _start_recorder(path: Path, replayer: Replayer) -> Any:
     recorder = McapRecorder.create(path, lambda: replayer.model or model, scenario_clock)
     recorder.start(model.knowledge, replayer.reorder_window, replayer.hold)
     return recorder
+
+
+ROS2_ERRORS = (BagError, ClassMapError)
+"""A bag or class map that cannot be used as asked: one line, like a missing file."""
 
 
 def _message(error: Exception) -> str:
@@ -225,11 +240,19 @@ def _ros2_options(args: argparse.Namespace) -> tuple[Ros2Input | None, Path | No
         raise CommandError("--ros2-pose and --class-map go with --ros2-detections TOPIC")
     else:
         _require_mcap(args.source, "replaying an MCAP file")
+        topics = ros2_topics(Path(args.source))
+        if topics is not None:
+            raise CommandError(
+                f"{args.source} is a ROS 2 bag ({', '.join(topics)}): pass --ros2-detections "
+                "TOPIC and --knowledge FILE (docs/ros2.md)"
+            )
     ros2_out = Path(args.ros2_out) if args.ros2_out else None
     if ros2_out is not None:
         require("ros2", "--ros2-out")
         if ros2_out.exists():
             raise CommandError(f"--ros2-out {ros2_out}: exists already; not overwriting it")
+        if not ros2_out.parent.is_dir():
+            raise CommandError(f"--ros2-out {ros2_out}: no such folder {ros2_out.parent}/")
     return ros2, ros2_out
 
 
@@ -246,7 +269,7 @@ def replay_command(args: argparse.Namespace) -> int:
             ros2=ros2,
             ros2_out=ros2_out,
         )
-    except (FileNotFoundError, KnowledgeError, RecordError, ImportError, ValueError) as error:
+    except (FileNotFoundError, KnowledgeError, RecordError, ImportError, *ROS2_ERRORS) as error:
         print(f"semwm replay: {_message(error)}", file=sys.stderr)
         return 2
     _summary("replay", out, metrics)
@@ -269,7 +292,7 @@ def record_command(args: argparse.Namespace) -> int:
             ros2=ros2,
             ros2_out=ros2_out,
         )
-    except (FileNotFoundError, KnowledgeError, RecordError, ImportError, ValueError) as error:
+    except (FileNotFoundError, KnowledgeError, RecordError, ImportError, *ROS2_ERRORS) as error:
         print(f"semwm record: {_message(error)}", file=sys.stderr)
         return 2
     _summary("record", out, metrics)
@@ -286,6 +309,8 @@ def _summary(what: str, out: Path | None, metrics: dict[str, Any]) -> None:
     )
     if metrics["tail_problem"]:
         print(f"warning: {metrics['tail_problem']}")
+    if metrics["first_refusal"]:
+        print(f"warning: the first refused batch: {metrics['first_refusal']}")
     if "ros2" in metrics:
         ros2 = metrics["ros2"]
         print(
@@ -371,7 +396,7 @@ def add_replay_command(subparsers: Any) -> argparse.ArgumentParser:
     )
     _common(parser)
     parser.add_argument(
-        "--speed", type=float, help="times real time (default: as fast as possible)"
+        "--speed", type=positive_float, help="times real time (default: as fast as possible)"
     )
     parser.add_argument("--out", help="output directory (default runs/replay-NAME)")
     parser.set_defaults(func=replay_command)

@@ -275,6 +275,16 @@ def run_serve(args: argparse.Namespace) -> int:
         require("foxglove", "--foxglove")
     if settings.record is not None:
         require("mcap", "--record")
+        if not settings.record.parent.is_dir():
+            raise CommandError(
+                f"--record {settings.record}: no such folder {settings.record.parent}/"
+            )
+    if (
+        settings.data_dir is not None
+        and settings.data_dir.exists()
+        and not settings.data_dir.is_dir()
+    ):
+        raise CommandError(f"--data-dir {settings.data_dir}: exists and is not a folder")
     log_level = args.serve_log_level or getattr(args, "log_level", None) or "info"
     app = create_app(settings)
     config = uvicorn.Config(

@@ -41,6 +41,16 @@ def knowledge_from_payload(payload: object, where: str = "record") -> Knowledge:
     return resolve(document, source if isinstance(source, str) else None)
 
 
+def _reason(error: DetectionError | OutOfOrderError, shown: int = 2) -> str:
+    """Why a batch was refused, in one short line (the first ``shown`` problems)."""
+    if isinstance(error, DetectionError) and len(error.problems) > shown:
+        first = "; ".join(
+            f"{'.'.join(map(str, p.path))}: {p.message}" for p in error.problems[:shown]
+        )
+        return f"{first} (and {len(error.problems) - shown} more)"
+    return str(error)
+
+
 @dataclass
 class ReplayCounts:
     """What a replay did: records applied and batches refused (other knowledge)."""
@@ -52,6 +62,8 @@ class ReplayCounts:
     resets: int = 0
     actions: int = 0
     refused_actions: int = 0
+    first_refusal: str | None = None
+    """Why the first refused batch or action was refused."""
 
 
 class Replayer:
@@ -121,6 +133,7 @@ class Replayer:
                         f"{where}: the batch was refused on replay: {error}"
                     ) from None
                 self.counts.refused_batches += 1
+                self.counts.first_refusal = self.counts.first_refusal or _reason(error)
             else:
                 self.counts.batches += 1
                 self.counts.detections += len(detections)
@@ -133,6 +146,7 @@ class Replayer:
                         f"{where}: the action was refused on replay: {error}"
                     ) from None
                 self.counts.refused_actions += 1
+                self.counts.first_refusal = self.counts.first_refusal or _reason(error)
             else:
                 self.counts.actions += 1
         else:

@@ -10,7 +10,8 @@ Each ``Detection3D`` (or ``Detection2D``) becomes one detection:
   pose is all zeros takes its ``bbox.center``. A covariance of all zeros (not
   filled in) or one that is not positive definite is left out, so the class's
   ``measurement_noise`` applies (counted);
-* **time**: the detection's ``header.stamp``, else the array's (s);
+* **time**: the detection's ``header.stamp``, else the array's (s), else (no stamp
+  at all) the bag's log time (counted);
 * **source**: the ``header.frame_id`` (the array's, else the detection's);
 * with a sensor pose (``--ros2-pose``) the position is in the sensor's frame: it
   is moved into the world frame by the latest pose at or before its time
@@ -53,6 +54,7 @@ class BagReport:
     out_of_order: int = 0
     most_late: float = 0.0
     undecodable: int = 0
+    no_stamp: int = 0
 
     def lines(self) -> list[str]:
         """The report, one line per kind of problem found (none when all was used)."""
@@ -100,6 +102,10 @@ class BagReport:
             )
         if self.undecodable:
             out.append(f"{self.undecodable} messages could not be decoded, left out")
+        if self.no_stamp:
+            out.append(
+                f"{self.no_stamp} messages without a header stamp (0): the bag's log time used"
+            )
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -118,6 +124,7 @@ class BagReport:
             "out_of_order": self.out_of_order,
             "most_late_s": self.most_late,
             "undecodable": self.undecodable,
+            "no_stamp": self.no_stamp,
         }
 
 
@@ -187,9 +194,14 @@ def detections_of(
     dimension: int,
     report: BagReport,
     pose_at: PoseAt | None = None,
+    log_time: float | None = None,
 ) -> list[dict[str, Any]]:
-    """The semwm detections (``POST /detections`` dicts) of one detection array."""
+    """The semwm detections (``POST /detections`` dicts) of one detection array; an
+    array without a stamp (0) takes ``log_time`` (the bag's, s) when given."""
     array_time = stamp_seconds(message.header.stamp)
+    if array_time == 0.0 and log_time is not None:
+        array_time = log_time
+        report.no_stamp += 1
     array_frame = str(message.header.frame_id)
     out: list[dict[str, Any]] = []
     for detection in message.detections:

@@ -50,6 +50,45 @@ def _connections(reader: Any, topic: str, types: tuple[str, ...], path: Path) ->
     return found
 
 
+def ros2_topics(path: Path) -> list[str] | None:
+    """``TOPIC (TYPE)`` of each topic when ``path`` is a ROS 2 bag (a rosbag2 folder, or
+    an MCAP file of CDR messages), else ``None``; read without ``rosbags`` (the
+    folder's ``metadata.yaml``, the MCAP file's summary), to tell a user who gave a
+    bag without ``--ros2-detections`` what it holds."""
+    if path.is_dir():
+        metadata = path / "metadata.yaml"
+        if not metadata.is_file():
+            return None
+        import yaml
+
+        try:
+            info = yaml.safe_load(metadata.read_text(encoding="utf-8"))
+            topics = info["rosbag2_bagfile_information"]["topics_with_message_count"]
+            return sorted(
+                f"{t['topic_metadata']['name']} ({t['topic_metadata']['type']})" for t in topics
+            )
+        except (yaml.YAMLError, KeyError, TypeError):
+            return None
+    if path.suffix != ".mcap" or not path.is_file():
+        return None
+    try:
+        from mcap.reader import make_reader
+
+        with path.open("rb") as handle:
+            summary = make_reader(handle).get_summary()
+    except Exception:  # not MCAP, or no mcap library: not for us to say
+        return None
+    if summary is None:
+        return None
+    cdr = [c for c in summary.channels.values() if c.message_encoding == "cdr"]
+    if not cdr:
+        return None
+    schemas = summary.schemas
+    return sorted(
+        f"{c.topic} ({schemas[c.schema_id].name if c.schema_id in schemas else '?'})" for c in cdr
+    )
+
+
 class PoseTrack:
     """A sensor's poses in time order; :meth:`at` gives the latest at or before a time."""
 
@@ -101,14 +140,14 @@ def bag_records(
         dimension = knowledge.world.dimension
         yield config_record(reorder_window)
         newest = -math.inf
-        for connection, _, raw in reader.messages(connections):
+        for connection, log_ns, raw in reader.messages(connections):
             try:
                 message = reader.deserialize(raw, connection.msgtype)
             except Exception:  # a damaged message: counted, the rest is read
                 report.undecodable += 1
                 continue
             report.messages += 1
-            stamp = stamp_seconds(message.header.stamp)
+            stamp = stamp_seconds(message.header.stamp) or 1e-9 * log_ns
             if stamp < newest:
                 report.out_of_order += 1
                 report.most_late = max(report.most_late, newest - stamp)
@@ -121,6 +160,7 @@ def bag_records(
                 dimension,
                 report,
                 poses.at if poses is not None else None,
+                1e-9 * log_ns,
             )
             if detections:
                 yield batch_record(detections)

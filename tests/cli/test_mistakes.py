@@ -157,6 +157,7 @@ def test_serve_setting_mistakes_name_the_option(
         (["serve", "--knowledge", "nothere.yaml"], "semwm serve: nothere.yaml: no such file"),
         (["replay", "nothere.jsonl", "--out", "r"], "nothere.jsonl: No such file or directory"),
         (["replay", "nothere", "--out", "r"], "nothere: no such file or directory, and not a"),
+        (["replay", "nothere.mcap"], "nothere.mcap: No such file or directory"),
         (
             ["simulate", "sim1", "--knowledge", "nothere.yaml"],
             "semwm simulate: nothere.yaml: No such file or directory",
@@ -167,6 +168,7 @@ def test_missing_files_are_one_line(folder: Path, argv: list[str], message: str)
     result = semwm(folder, *argv)
     assert_clean(result, message)
     assert "[Errno" not in result.stderr
+    assert sorted(p.name for p in folder.iterdir()) == ["broken.yaml", "warehouse.yaml"]
 
 
 def test_help_lists_every_scenario(folder: Path) -> None:
@@ -185,3 +187,40 @@ def test_replay_of_a_ros2_bag_without_the_ros2_extra(folder: Path) -> None:
     )
     assert_clean(result, 'reading a ROS 2 bag needs rosbags: pip install "semwm[ros2]"')
     assert not (folder / "r").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--data-dir", "warehouse.yaml"], "--data-dir warehouse.yaml: exists and is not a folder"),
+        (["--record", "nothere/x.mcap"], "--record nothere/x.mcap: no such folder nothere/"),
+    ],
+)
+def test_serve_paths_that_cannot_be_used(folder: Path, argv: list[str], message: str) -> None:
+    result = semwm(folder, "serve", "--knowledge", "warehouse.yaml", "--port", "0", *argv)
+    assert_clean(result, f"semwm serve: {message}")
+    assert not (folder / "nothere").exists()
+
+
+def test_replay_into_knowledge_that_refuses_everything_says_why(folder: Path) -> None:
+    result = semwm(folder, "replay", "sim1", "--knowledge", "warehouse.yaml", "--out", "r",
+                   "--no-progress")  # fmt: skip
+    assert result.returncode == 0 and "Traceback" not in result.stderr
+    assert "0 batches, 0 detections, 51 refused" in result.stdout
+    assert (
+        "warning: the first refused batch: 0.class: unknown class 'Cup'; known classes: Thing; "
+        "1.class: unknown class 'CokeCan'; known classes: Thing (and 2 more)"
+    ) in result.stdout
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--speed", "-1"], "argument --speed: expected a number > 0, found '-1'"),
+        (["--ros2-out", "nothere/bag"], "--ros2-out nothere/bag: no such folder nothere/"),
+    ],
+)
+def test_replay_option_mistakes(folder: Path, argv: list[str], message: str) -> None:
+    result = semwm(folder, "replay", "sim1", "--out", "r", "--no-progress", *argv)
+    assert_clean(result, message)
+    assert sorted(p.name for p in folder.iterdir()) == ["broken.yaml", "warehouse.yaml"]

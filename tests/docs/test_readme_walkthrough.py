@@ -11,13 +11,11 @@ from __future__ import annotations
 
 import os
 import re
-import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
-
-import httpx
 
 ROOT = Path(__file__).resolve().parents[2]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
@@ -48,11 +46,21 @@ def run_shell(code: str, cwd: Path, port: int | None = None) -> list[str]:
     return result.stdout.strip().splitlines()
 
 
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port: int = probe.getsockname()[1]
-    return port
+def bound_port(server: subprocess.Popen[str], timeout: float = 60.0) -> int:
+    """The port ``semwm serve --port 0`` bound, from uvicorn's "running on" line."""
+    assert server.stderr is not None
+    deadline = time.monotonic() + timeout
+    seen = []
+    while time.monotonic() < deadline:
+        line = server.stderr.readline()
+        if not line and server.poll() is not None:
+            break
+        seen.append(line)
+        found = re.search(r"running on http://127\.0\.0\.1:(\d+)", line)
+        if found:  # keep reading its log, so that a full pipe never blocks the server
+            threading.Thread(target=server.stderr.read, daemon=True).start()
+            return int(found.group(1))
+    raise AssertionError("semwm serve did not start:\n" + "".join(seen))
 
 
 def test_the_python_example_prints_what_the_readme_shows(tmp_path: Path) -> None:
@@ -71,22 +79,12 @@ def test_the_http_example_against_a_real_server_prints_what_the_readme_shows(
 ) -> None:
     code = block("bash", 0)
     assert "curl" in code
-    port = free_port()
     server = subprocess.Popen(
-        [str(BIN / "semwm"), "serve", "--knowledge", "knowledge/sim1.yaml", "--port", str(port)],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        [str(BIN / "semwm"), "serve", "--knowledge", "knowledge/sim1.yaml", "--port", "0"],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                pass
-            assert server.poll() is None, server.stderr.read() if server.stderr else ""
-            assert time.monotonic() < deadline, "semwm serve did not start in 60 s"
-            time.sleep(0.2)
+        port = bound_port(server)
         printed = run_shell(code, tmp_path, port)
     finally:
         server.terminate()

@@ -404,6 +404,19 @@ def test_the_world_written_as_ros2_detection3d_arrays_reads_back(tmp_path: Path)
             covariance = np.asarray(best.pose.covariance).reshape(6, 6)
             assert covariance[:2, :2] == pytest.approx(np.asarray(o["covariance"]))
     assert any(message.detections for _, message in messages)
+    # as ROS 2 tools and Foxglove expect it: a rosbag2 folder whose MCAP file has a
+    # ros2msg schema and CDR messages (read here with the mcap library)
+    from mcap.reader import make_reader
+
+    (mcap_file,) = out_bag.glob("*.mcap")
+    assert (out_bag / "metadata.yaml").is_file()
+    with mcap_file.open("rb") as handle:
+        summary = make_reader(handle).get_summary()
+    assert summary is not None
+    (schema,) = summary.schemas.values()
+    (channel,) = summary.channels.values()
+    assert (schema.name, schema.encoding) == ("vision_msgs/msg/Detection3DArray", "ros2msg")
+    assert (channel.topic, channel.message_encoding) == ("/semwm/world", "cdr")
 
 
 def test_ros2_out_does_not_overwrite(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -412,4 +425,50 @@ def test_ros2_out_does_not_overwrite(tmp_path: Path, capsys: pytest.CaptureFixtu
                    str(tmp_path / "out"), "--no-progress"])  # fmt: skip
     assert status == 2
     assert "exists already; not overwriting it" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_semwm_record_of_a_bag_replays_to_the_same_world(tmp_path: Path) -> None:
+    bag = good_bag(tmp_path / "robot_bag")
+    recording = tmp_path / "robot.mcap"
+    status = main(["record", str(bag), str(recording), "--ros2-detections", "/detections",
+                   "--knowledge", str(SIM1), "--ros2-out", str(tmp_path / "world_bag"),
+                   "--no-progress"])  # fmt: skip
+    assert status == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["robot.mcap", "robot_bag", "world_bag"]
+    assert main(["replay", str(recording), "--out", str(tmp_path / "out"), "--no-progress"]) == 0
+    lines = (tmp_path / "out" / "world.jsonl").read_text().splitlines()
+    assert json.loads(lines[-1]) == direct_world(bag)
+
+
+def test_arrays_without_a_stamp_take_the_log_time(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    messages = [
+        (t, array3d(0.0, "camera", [detection3d(0.0, "camera", [result("Cup", 0.9, CUP, VAR)])]))
+        for t in scan_times(10)
+    ]
+    bag = write_bag(
+        tmp_path / "bag", {"/detections": ("vision_msgs/msg/Detection3DArray", messages)}
+    )
+    status, metrics, worlds = replay(bag, tmp_path / "out")
+    assert status == 0
+    assert metrics["ros2"]["no_stamp"] == 10
+    assert worlds[-1]["time"] == pytest.approx(scan_times(10)[-1], abs=1e-6)
+    assert (
+        "10 messages without a header stamp (0): the bag's log time used" in capsys.readouterr().out
+    )
+
+
+@pytest.mark.parametrize("as_file", [False, True], ids=["folder", "mcap file"])
+def test_a_bag_given_without_ros2_detections_says_what_it_holds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], as_file: bool
+) -> None:
+    bag = good_bag(tmp_path / "bag")
+    source = next(bag.glob("*.mcap")) if as_file else bag
+    status = main(["replay", str(source), "--out", str(tmp_path / "out"), "--no-progress"])
+    assert status == 2
+    err = capsys.readouterr().err
+    assert f"{source} is a ROS 2 bag (/detections (vision_msgs/msg/Detection3DArray))" in err
+    assert "pass --ros2-detections TOPIC and --knowledge FILE" in err
     assert not (tmp_path / "out").exists()
