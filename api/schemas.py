@@ -217,7 +217,7 @@ class IgnoredOut(BaseModel):
         description="out_of_range: beyond its detector's range from its sensor_position; "
         "outside_region: outside the knowledge's region by more than its noise."
     )
-    message: str
+    message: str = Field(description="What was wrong, with a hint (check units and frame).")
 
 
 class IngestOut(BaseModel):

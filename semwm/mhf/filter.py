@@ -184,6 +184,7 @@ class MultipleHypothesisFilter:
             predicted.position,
             self.region_margins(tracks),
             _unconfirmed(tracks),
+            self._spread(predicted),
         )
         if not watched.any():
             return np.zeros(len(tracks))
@@ -193,6 +194,15 @@ class MultipleHypothesisFilter:
                 scan.source, [t.lineage for t in tracks], f, [t.cls for t in tracks]
             )
         result: FloatArray = f * watched * self.inside(predicted)
+        return result
+
+    @staticmethod
+    def _spread(predicted: Predicted) -> FloatArray:
+        """``(N,)`` (m): each object's position standard deviation (its estimate's
+        largest variance): how far from its estimate it may be."""
+        P = predicted.position_covariance
+        largest = P.diagonal(axis1=1, axis2=2).max(axis=1) if P.shape[0] else np.zeros(0)
+        result: FloatArray = np.sqrt(np.maximum(largest, 0.0))
         return result
 
     def inside(self, predicted: Predicted) -> FloatArray:
@@ -383,8 +393,7 @@ class MultipleHypothesisFilter:
         kept = {k: table.existence.get(k, 1.0) for k in referenced}
         observed = state.observed
         if (self.observed_rates or self.missed_detections) and measurements:
-            span = _span(scan.positions) if scan is not None else None
-            observed = self._observe(observed, state.tracks, options, final, table, time, span)
+            observed = self._observe(observed, state.tracks, options, final, table, time)
         return MHFState(final, tracks, time, table.next_key, kept, observed)
 
     def _coverage(self, measurements: Sequence[Measurement]) -> ScanCoverage:
@@ -468,7 +477,6 @@ class MultipleHypothesisFilter:
         final: Sequence[Cluster],
         table: _TrackTable,
         time: float,
-        span: float | None = None,
     ) -> ObservedRates:
         """The observed rates after the scan: per detector, which objects its detections
         updated or started in the most probable hypothesis (:mod:`semwm.mhf.rates`), and
@@ -508,7 +516,7 @@ class MultipleHypothesisFilter:
         source = (first.source or "") if first is not None else ""
         sensor = None if first is None or first.sensor is None else tuple(first.sensor.tolist())
         return observed.after_scan(
-            source, time, detected, born, alive, sensor, classes, born_elsewhere, span
+            source, time, detected, born, alive, sensor, classes, born_elsewhere
         )
 
     def undetected(
@@ -861,11 +869,3 @@ def _unconfirmed(tracks: Sequence[Track]) -> list[bool]:
     """Per version: no detection since the one that started it."""
     return [t.last_seen <= t.created for t in tracks]
 
-
-def _span(positions: FloatArray) -> float | None:
-    """The diagonal (m) of the box around a scan's detections; ``None`` for fewer than
-    two (:attr:`semwm.mhf.rates.SourceClock.span`)."""
-    if positions.shape[0] < 2:
-        return None
-    extent = positions.max(axis=0) - positions.min(axis=0)
-    return float(np.sqrt(extent @ extent))

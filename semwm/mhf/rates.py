@@ -47,7 +47,7 @@ is evidence only from a scan that could have seen the object), so the two stay o
 Poisson model. With one source that reports at the knowledge's rate this is the
 knowledge's model (``g = f_c``); the knowledge's rate is a floor, never lowered.
 World setting ``observed_detection_rates: false`` turns the observed rates off (the
-sources' clocks and spans, which say where they look, are kept).
+sources' clocks, which say when they look, are kept).
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import numpy.typing as npt
+from scipy.special import ndtr
 
 from semwm.filters.motion import FloatArray
 
@@ -78,9 +78,6 @@ INTERVAL_WEIGHT = 0.1
 
 DISCOUNT = 0.98
 """Per scan of its source, the weight kept by a stream's hit and miss counts."""
-
-SPAN_WEIGHT = 0.1
-"""Weight of the newest scan in a source's moving average of its scans' spans."""
 
 MAX_MISS_INTERVALS = 2.0
 """A scan counts as a miss for at most this many of its source's mean intervals since
@@ -117,11 +114,6 @@ class SourceClock:
     interval: float | None = None
     position: tuple[float, ...] | None = None
     speed: float = 0.0
-    span: float = 0.0
-    """How far apart (m) the source reports things in one scan: a moving average of
-    the diagonal of the box around each scan's detections (scans of two or more): a
-    lower bound of its view's size, the neighbourhood it watches around what it
-    reports (:meth:`ObservedRates.watched`)."""
 
 @dataclass(frozen=True, slots=True)
 class StreamCounts:
@@ -182,53 +174,60 @@ class ObservedRates:
         positions: FloatArray,
         margins: FloatArray,
         unconfirmed: Sequence[bool],
-    ) -> npt.NDArray[np.bool_]:
-        """``(N,)``: which objects the scan could have seen, so that not reporting them
-        is evidence that they are gone (docs/knowledge.md, "What semwm concludes from
-        not seeing something").
+        spread: FloatArray | None = None,
+    ) -> FloatArray:
+        r"""``(N,)``: the probability that the scan could have seen each object, so that
+        not reporting it is evidence that it is gone (docs/knowledge.md, "What semwm
+        concludes from not seeing something").
 
         * The scan gave its sensor's position and every detector of it has a
-          ``range``: the objects within that range of the sensor.
+          ``range``: the probability that the object is within that range of the
+          sensor, :math:`\Phi((r - d) / s)` with ``d`` its estimate's distance and
+          ``s`` its ``spread`` (m: the estimate's and the measurement's standard
+          deviation; 0 makes it a hard cut). An object on the range's edge may be
+          just outside it, and is then never detected there.
         * Every detector of the scan is declared ``static`` in the knowledge (fixed
           coverage): every object (the region's inside probability weighs it in
           :meth:`~semwm.mhf.filter.MultipleHypothesisFilter.miss_rates`).
         * Otherwise the source's coverage is learnt from what it reports: an object
           the source has itself detected (``sources``: each object version's
-          :attr:`~semwm.mhf.state.Track.sources`), and either near what this scan
-          reports (within the source's :attr:`SourceClock.span`, at least the
-          object's ``margins``: the gate's quantile of its measurement noise), or
-          reported once and never confirmed (a lone false alarm is denied by the
-          sensor that made it, while that sensor keeps scanning).
+          :attr:`~semwm.mhf.state.Track.sources`), and either among what this scan
+          reports (within the convex hull of its detections, widened by the
+          object's ``margins``: a sensor's view is convex, so what lies between
+          things it sees now is in its view too), or reported once and never
+          confirmed (a lone false alarm is denied by the sensor that made it, while
+          that sensor keeps scanning).
 
         An object another source found, or that this source found elsewhere than it
         now looks, is not watched: a scan from elsewhere is never a miss.
         """
         count = len(sources)
         if count == 0:
-            return np.zeros(0, dtype=bool)
+            return np.zeros(0)
         if scan.sensor is not None and scan.reach is not None:
             k = min(positions.shape[1], scan.sensor.shape[0])
             offset = positions[:, :k] - scan.sensor[:k]
-            inside: npt.NDArray[np.bool_] = (
-                np.einsum("nd,nd->n", offset, offset) <= scan.reach * scan.reach
-            )
+            distance = np.sqrt(np.einsum("nd,nd->n", offset, offset))
+            if spread is None:
+                hard: FloatArray = (distance <= scan.reach).astype(float)
+                return hard
+            sd = np.maximum(spread, 1e-9)
+            inside: FloatArray = ndtr((scan.reach - distance) / sd)
             return inside
         if scan.fixed:
-            return np.ones(count, dtype=bool)
+            return np.ones(count)
         source = scan.source
         by_source = np.fromiter((source in s for s in sources), dtype=bool, count=count)
         if not by_source.any():
-            return by_source
-        clock = self.sources.get(source)
-        span = clock.span if clock is not None else 0.0
-        radius = np.maximum(span, margins.max(axis=1) if margins.size else 0.0)
+            return np.zeros(count)
+        radius = margins.max(axis=1) if margins.size else np.zeros(count)
         near = np.zeros(count, dtype=bool)
         if scan.positions.shape[0]:
             rows = np.flatnonzero(by_source)
             d = min(positions.shape[1], scan.positions.shape[1])
-            nearest = _nearest_distance(positions[rows, :d], scan.positions[:, :d])
-            near[rows] = nearest <= radius[rows]
-        result: npt.NDArray[np.bool_] = by_source & (near | np.asarray(unconfirmed, dtype=bool))
+            near[rows] = hull_distance(positions[rows, :d], scan.positions[:, :d]) <= radius[rows]
+        watched = by_source & (near | np.asarray(unconfirmed, dtype=bool))
+        result: FloatArray = watched.astype(float)
         return result
 
     def source_rates(
@@ -313,7 +312,6 @@ class ObservedRates:
         position: tuple[float, ...] | None = None,
         classes: Mapping[int, str] | None = None,
         born_elsewhere: Mapping[str, Iterable[int]] | None = None,
-        span: float | None = None,
     ) -> ObservedRates:
         """The rates after one scan of ``source`` at ``time``.
 
@@ -327,33 +325,26 @@ class ObservedRates:
         stream sees them, but they are not counted: the counts follow the most
         probable account of what it detects). A lineage that only such a hypothesis
         holds (an outlier that the best one calls clutter) would otherwise be seen by
-        no stream and fade at the class's rate for seconds. ``span``: the diagonal of
-        the box around the scan's detections (``None``: fewer than two).
+        no stream and fade at the class's rate for seconds.
         """
         sources = dict(self.sources)
         clock = sources.get(source)
         if clock is None:
-            sources[source] = SourceClock(time, None, position, 0.0, span or 0.0)
+            sources[source] = SourceClock(time, None, position)
+        elif time > clock.last_time:
+            step = time - clock.last_time
+            interval = (
+                step
+                if clock.interval is None
+                else (1.0 - INTERVAL_WEIGHT) * clock.interval + INTERVAL_WEIGHT * step
+            )
+            speed = clock.speed
+            if position is not None and clock.position is not None:
+                moved = np.subtract(position, clock.position)
+                speed = float(np.sqrt(moved @ moved)) / step
+            sources[source] = SourceClock(time, interval, position, speed)
         else:
-            spread = clock.span
-            if span is not None:
-                spread = span if spread <= 0.0 else spread + SPAN_WEIGHT * (span - spread)
-            if time > clock.last_time:
-                step = time - clock.last_time
-                interval = (
-                    step
-                    if clock.interval is None
-                    else (1.0 - INTERVAL_WEIGHT) * clock.interval + INTERVAL_WEIGHT * step
-                )
-                speed = clock.speed
-                if position is not None and clock.position is not None:
-                    moved = np.subtract(position, clock.position)
-                    speed = float(np.sqrt(moved @ moved)) / step
-                sources[source] = SourceClock(time, interval, position, speed, spread)
-            else:
-                sources[source] = SourceClock(
-                    clock.last_time, clock.interval, position, clock.speed, spread
-                )
+            sources[source] = SourceClock(clock.last_time, clock.interval, position, clock.speed)
         streams = dict(self.streams)
 
         def class_of(lineage: int) -> str:
@@ -392,13 +383,35 @@ class ObservedRates:
         return ObservedRates(sources, streams, seen)
 
 
-def _nearest_distance(points: FloatArray, targets: FloatArray) -> FloatArray:
-    """``(N,)``: each point's distance to the nearest of ``targets`` ``(M, d)``."""
-    if points.shape[0] * targets.shape[0] <= 65536:
-        offset = points[:, None, :] - targets[None, :, :]
-        result: FloatArray = np.sqrt(np.einsum("nmd,nmd->nm", offset, offset).min(axis=1))
+def hull_distance(points: FloatArray, corners: FloatArray) -> FloatArray:
+    """``(N,)`` (m): how far each point lies outside the convex hull of ``corners``
+    ``(M, d)`` (0 inside): the distance to the point for one corner, to the segment for
+    two or for corners on one line; otherwise the largest signed distance to the
+    hull's facets (exact inside and along the faces, at most the true distance
+    beyond a corner)."""
+    if corners.shape[0] == 1:
+        offset = points - corners[0]
+        result: FloatArray = np.sqrt(np.einsum("nd,nd->n", offset, offset))
         return result
-    from scipy.spatial import cKDTree  # only large scans need it
+    if corners.shape[0] >= points.shape[1] + 1:
+        from scipy.spatial import ConvexHull, QhullError  # only scans of several need it
 
-    distances, _ = cKDTree(targets).query(points, k=1)
-    return np.asarray(distances, dtype=float)
+        try:
+            equations = ConvexHull(corners).equations  # (F, d + 1): unit normal, offset
+        except QhullError:  # on one line (or plane): the segment of its extremes
+            pass
+        else:
+            signed = points @ equations[:, :-1].T + equations[:, -1]
+            outside: FloatArray = np.maximum(signed.max(axis=1), 0.0)
+            return outside
+    centred = corners - corners.mean(axis=0)
+    direction = np.linalg.svd(centred, full_matrices=False)[2][0]
+    along = centred @ direction
+    a = corners.mean(axis=0) + along.min() * direction
+    b = corners.mean(axis=0) + along.max() * direction
+    ab = b - a
+    length = float(ab @ ab)
+    t = np.clip((points - a) @ ab / length, 0.0, 1.0) if length > 0 else np.zeros(len(points))
+    offset = points - (a + t[:, None] * ab)
+    segment: FloatArray = np.sqrt(np.einsum("nd,nd->n", offset, offset))
+    return segment

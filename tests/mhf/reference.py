@@ -32,8 +32,8 @@ object holding the detection's label within ``label_gate``, N is 0.9 N(S) + 0.1 
 (label_gate / 3)^2 I)). Between scans every object's existence decays and every
 Between scans every object's existence decays by its leave rate (no weight); at a
 scan, the objects its source watches (the source took a detection of the object, and
-reports something within its mean span of it, or the object has had no detection
-after the time it was created) are
+it lies within the convex hull of the scan's detections widened by its noise margin,
+or it has had no detection after the time it was created) are
 missed over the time since the source's previous scan, and every hypothesis is
 weighted by their missed-detection probabilities q (rates f_existing times the
 probability of being inside the region widened by the noise's gate quantile); objects
@@ -59,6 +59,7 @@ import numpy as np
 from scipy.special import chdtri
 
 from semwm.knowledge.model import Knowledge
+from semwm.mhf.rates import hull_distance
 
 
 @dataclass(frozen=True)
@@ -111,11 +112,10 @@ class ReferenceMHF:
         region = knowledge.world.region
         self.volume = math.prod(hi - lo for lo, hi in region) if region else 1.0
         # each source's clock (semwm.mhf.rates.SourceClock): last scan, mean interval
-        # between its scans, mean span of its scans' detections
+        # between its scans
         self.created: dict[int, float] = {}  # lineage (its first detection) -> time
         self.last_scan: dict[str, float] = {}
         self.intervals: dict[str, float] = {}
-        self.spans: dict[str, float] = {}
 
     # -------------------------------------------------------------- knowledge
     def ancestors(self, cls: str) -> set[str]:
@@ -198,15 +198,16 @@ class ReferenceMHF:
         return replace(o, r=o.r * math.exp(-mu * dt))
 
     def watched(self, o: RefObject, scan: Sequence[RefDetection]) -> bool:
-        """The scan's source detected the object before, and reports something near it
-        (within its mean span, at least the object's margin), or it is unconfirmed."""
+        """The scan's source detected the object before, and it lies within the convex
+        hull of the scan's detections widened by its margin, or it is unconfirmed."""
         source = scan[0].source or ""
         if source not in o.sources:
             return False
         if o.last_seen <= self.created[o.lineage]:  # no detection since its first
             return True
-        radius = max(self.spans.get(source, 0.0), *(self.margin(o, a) for a in range(len(o.x))))
-        return any(float(np.linalg.norm(z.z - o.x)) <= radius for z in scan)
+        radius = max(self.margin(o, a) for a in range(len(o.x)))
+        corners = np.array([z.z for z in scan])
+        return float(hull_distance(o.x[None, :], corners)[0]) <= radius
 
     def miss(self, o: RefObject, span: float) -> tuple[RefObject, float]:
         """Existence after the scan's source looked for span seconds where the object is
@@ -225,7 +226,7 @@ class ReferenceMHF:
         return t - last if interval is None else min(t - last, 2.0 * interval)
 
     def after_scan(self, scan: Sequence[RefDetection]) -> None:
-        """The source's clock: last scan, mean interval, mean span of its detections."""
+        """The source's clock: last scan, mean interval between its scans."""
         source, t = scan[0].source or "", scan[0].time
         last = self.last_scan.get(source)
         if last is not None and t > last:
@@ -233,12 +234,6 @@ class ReferenceMHF:
             self.intervals[source] = t - last if old is None else 0.9 * old + 0.1 * (t - last)
         if last is None or t > last:
             self.last_scan[source] = t
-        if len(scan) >= 2:
-            zs = np.array([z.z for z in scan])
-            extent = zs.max(axis=0) - zs.min(axis=0)
-            span = float(np.sqrt(extent @ extent))
-            old_span = self.spans.get(source, 0.0)
-            self.spans[source] = span if old_span <= 0.0 else old_span + 0.1 * (span - old_span)
 
     @staticmethod
     def density(y: np.ndarray, S: np.ndarray) -> float:

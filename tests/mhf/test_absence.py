@@ -39,28 +39,47 @@ def test_another_sources_scans_never_miss_an_object_it_never_saw() -> None:
     assert cup.existence == pytest.approx(at_2 * math.exp(-leave * (t - 1.8)), rel=1e-6)
 
 
+AROUND = [  # a table and two cans around the cup at (1, 1)
+    {"class": "Table", "position": [2.0, 1.2]},
+    {"class": "CokeCan", "position": [0.5, 0.4]},
+    {"class": "BeerCan", "position": [0.6, 1.8]},
+]
+
+
 def test_a_source_that_keeps_looking_there_removes_what_is_gone() -> None:
-    """A camera (no pose) reports a Cup and a Table beside it; the Cup is taken away and
-    the camera goes on reporting the Table: its scans are misses for the Cup (it keeps
-    reporting things within its view's span of it), and the Cup leaves the world."""
+    """A camera (no pose) reports a Cup among a table and two cans; the Cup is taken
+    away and the camera goes on reporting the others: the Cup lies between things it
+    sees (inside the convex hull of its detections: a view is convex), so its scans
+    are misses for the Cup, and the Cup leaves the world."""
     wm = WorldModel(load_knowledge(SIM1))
     t = 0.0
     for _ in range(20):
-        wm.ingest(
-            [
-                {"time": t, "class": "Cup", "position": [1.0, 1.0], "source": "cam"},
-                {"time": t, "class": "Table", "position": [2.0, 1.2], "source": "cam"},
-            ]
-        )
+        cup = {"time": t, "class": "Cup", "position": [1.0, 1.0], "source": "cam"}
+        wm.ingest([cup, *({**o, "time": t, "source": "cam"} for o in AROUND)])
         t = round(t + 0.2, 6)
     assert _cup(wm)[0].existence > 0.9
     removed_at = t
     while t < removed_at + 5.0:
-        wm.ingest([{"time": t, "class": "Table", "position": [2.0, 1.2], "source": "cam"}])
+        wm.ingest([{**o, "time": t, "source": "cam"} for o in AROUND])
         t = round(t + 0.2, 6)
     cups = _cup(wm)
     assert not cups or cups[0].existence < 0.05
     assert not [o for o in wm.world().objects if o.cls == "Cup"]
+
+
+def test_a_source_that_looks_beside_an_object_does_not_miss_it() -> None:
+    """The same camera then reports only the table beside the cup (it turned a little):
+    the cup is not between things it sees, so nothing says it could see the cup."""
+    wm = WorldModel(load_knowledge(SIM1))
+    t = 0.0
+    for _ in range(20):
+        cup = {"time": t, "class": "Cup", "position": [1.0, 1.0], "source": "cam"}
+        wm.ingest([cup, *({**o, "time": t, "source": "cam"} for o in AROUND)])
+        t = round(t + 0.2, 6)
+    for _ in range(25):
+        wm.ingest([{**AROUND[0], "time": t, "source": "cam"}])
+        t = round(t + 0.2, 6)
+    assert _cup(wm)[0].existence > 0.9
 
 
 def test_a_lone_false_alarm_is_denied_by_the_sensor_that_made_it() -> None:

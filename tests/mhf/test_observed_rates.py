@@ -10,7 +10,7 @@ import pytest
 
 from semwm import WorldModel
 from semwm.knowledge.loader import knowledge_from_text
-from semwm.mhf.rates import WINDOW_DETECTIONS, ObservedRates, ScanCoverage
+from semwm.mhf.rates import WINDOW_DETECTIONS, ObservedRates, ScanCoverage, hull_distance
 
 KNOWLEDGE = """
 world: {dimension: 2, region: [[0, 4], [0, 3]], observed_detection_rates: %s}
@@ -155,20 +155,32 @@ def test_a_scan_with_a_sensor_position_and_a_range_watches_what_is_within_reach(
     assert watched.tolist() == [True, False, True]
 
 
-def test_without_a_pose_a_source_watches_only_what_it_detected_near_what_it_reports() -> None:
-    """Learnt coverage: objects it detected, within its scans' span of what this scan
-    reports, or unconfirmed; never another source's objects."""
+def test_without_a_pose_a_source_watches_what_it_detected_among_what_it_reports() -> None:
+    """Learnt coverage: objects it detected, inside the convex hull of this scan's
+    detections (a view is convex: what lies between things seen is in view), or
+    unconfirmed; never another source's objects."""
     rates = ObservedRates()
-    for k in range(5):  # source a reports two things 1 m apart: span 1 m
-        rates = rates.after_scan("a", k / 10, {"camera": [1, 2]}, {}, {1, 2}, span=1.0)
-    assert rates.sources["a"].span == pytest.approx(1.0)
-    scan = ScanCoverage("a", np.array([[0.0, 0.0]]))
-    positions = np.array([[0.8, 0.0], [3.0, 0.0], [0.5, 0.0], [6.0, 0.0]])
-    sources = [frozenset({"a"}), frozenset({"a"}), frozenset({"b"}), frozenset({"a"})]
-    unconfirmed = [False, False, False, True]
-    watched = rates.watched(scan, sources, positions, np.full((4, 2), 0.1), unconfirmed)
-    # near and its own; far; near but another source's; far but its unconfirmed one
-    assert watched.tolist() == [True, False, False, True]
+    scan = ScanCoverage("a", np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 2.0]]))
+    positions = np.array([[1.0, 0.5], [3.0, 3.0], [1.0, 0.6], [6.0, 0.0], [2.05, 0.0]])
+    a, b = frozenset({"a"}), frozenset({"b"})
+    sources = [a, a, b, a, a]
+    unconfirmed = [False, False, False, True, False]
+    watched = rates.watched(scan, sources, positions, np.full((5, 2), 0.1), unconfirmed)
+    # inside and its own; outside; inside but another source's; outside but its
+    # unconfirmed one; just past a corner, within the margin
+    assert watched.tolist() == [1.0, 0.0, 0.0, 1.0, 1.0]
+
+
+def test_hull_distance_is_zero_inside_and_the_distance_outside() -> None:
+    square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0], [1.0, 1.0]])
+    points = np.array([[1.0, 1.5], [3.0, 1.0], [1.0, -0.5]])
+    assert hull_distance(points, square).tolist() == pytest.approx([0.0, 1.0, 0.5])
+    line = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])  # collinear: the segment
+    assert hull_distance(np.array([[1.0, 1.0], [3.0, 0.0]]), line).tolist() == pytest.approx(
+        [1.0, 1.0]
+    )
+    one = np.array([[1.0, 1.0]])
+    assert hull_distance(np.array([[4.0, 5.0]]), one).tolist() == pytest.approx([5.0])
 
 
 def test_a_scan_counts_as_looking_for_at_most_two_intervals_and_silence_for_none() -> None:

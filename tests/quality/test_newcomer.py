@@ -147,14 +147,15 @@ def test_a_superclass_report_keeps_the_specific_class(tmp_path: Path) -> None:
 
 def test_an_object_that_goes_unseen_is_removed(tmp_path: Path) -> None:
     """Case 5: a lone track with no competitor used to stay forever. A cup seen for 2 s
-    and then never again, while the camera keeps reporting the can beside it (so it
-    still looks there), leaves the world."""
+    and then never again, while the camera keeps reporting the cans on either side of
+    it (so it still looks there), leaves the world."""
     wm = _world(tmp_path)
+    cans = ([1.4, 1.2], [0.6, 0.8])
     for d in _cup_stream(np.random.default_rng(2), 2.0):
-        wm.ingest([d, {**d, "class": "Can", "position": [1.4, 1.2]}])
-    assert len(wm.world().objects) == 2
+        wm.ingest([d, *({**d, "class": "Can", "position": list(at)} for at in cans)])
+    assert len(wm.world().objects) == 3
     for k in range(20):
-        wm.ingest({"time": 2.0 + 0.2 * k, "class": "Can", "position": [1.4, 1.2]})
+        wm.ingest([{"time": 2.0 + 0.2 * k, "class": "Can", "position": list(at)} for at in cans])
     assert not wm.world(near=(1.0, 1.0, 0.2)).objects
 
 
