@@ -252,8 +252,8 @@ class WorldObjectOut(BaseModel):
     model_config = ConfigDict(populate_by_name=True)
 
     id: int = Field(
-        description="public id: stays with the object while it lives; a provisional negative "
-        "id for an object below the publishing threshold that min_existence asked for"
+        description="public id (positive): stays with the object while it lives; a tentative "
+        "object has 1000000001 + the number of the detection that started it"
     )
     cls: str = Field(alias="class", description="its most probable class")
     label: str | None = Field(description="its identity, from labelled detections (else null)")
@@ -275,6 +275,12 @@ class WorldObjectOut(BaseModel):
     )
     confidence: ConfidenceOut | None = Field(
         default=None, description="paper 004's confidence (mht): value and state"
+    )
+    tentative: bool = Field(
+        default=False,
+        description="below the publishing threshold (listed because min_existence asked "
+        "for it); its id is 1000000001 + the number of the detection that started it, and "
+        "GET /world/objects/{id} answers it, later under its published id",
     )
 
 

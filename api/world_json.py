@@ -43,6 +43,7 @@ def object_value(obj: WorldObject) -> dict[str, Any]:
             if confidence is None
             else {"value": float(confidence.value), "state": confidence.state}
         ),
+        "tentative": obj.tentative,
     }
 
 

@@ -64,12 +64,19 @@ from semwm.validation import (
     outside_region,
     parse,
 )
-from semwm.world_types import HypothesisObject, HypothesisSummary, WorldObject, WorldState
+from semwm.world_types import (
+    TENTATIVE_IDS,
+    HypothesisObject,
+    HypothesisSummary,
+    WorldObject,
+    WorldState,
+)
 
 ScanKey = tuple[float, str]
 _HANDOVER_GATE = 13.8  # chi-square 99.9 % for 2 degrees of freedom; ids move only this close
 _SAME_OBJECT_GATE = 1.0  # 4 x Bhattacharyya distance: two lineages' estimates coincide
 _GROUPING_FLOOR = 1e-3  # lineages less likely than this are not grouped
+_TENTATIVE_FLOOR = 1e-12  # a tentative object by id: whatever its existence
 
 
 IgnoreReason = Literal["out_of_range", "outside_region"]
@@ -1303,7 +1310,19 @@ class WorldModel:
         return WorldState(time=at, objects=tuple(_unique_labels(objects)))
 
     def object(self, object_id: int, time: float | None = None) -> WorldObject | None:
-        """One object of the world by its id, or ``None``."""
+        """One object of the world by its id, or ``None``. A tentative id
+        (:data:`~semwm.world_types.TENTATIVE_IDS`) finds its object while it is tentative,
+        and under its published id once it is published."""
+        if object_id > TENTATIVE_IDS:
+            lineage = object_id - TENTATIVE_IDS - 1
+            if self._pending:
+                with self._including_pending():
+                    published = self._ids.get(lineage)
+            else:
+                published = self._ids.get(lineage)
+            wanted = published if published is not None else object_id
+            objects = self.world(time, min_existence=_TENTATIVE_FLOOR).objects
+            return next((o for o in objects if o.id == wanted), None)
         return next((o for o in self.world(time).objects if o.id == object_id), None)
 
     def _world_object(
@@ -1330,11 +1349,13 @@ class WorldModel:
             ]
             modes = dict(zip(names, predicted.mu[i].tolist(), strict=True))
         object_id = self._ids.get(track.lineage)
+        tentative = object_id is None
         if object_id is None:
-            # below the publishing threshold and asked for (min_existence): a provisional
-            # id, -(1 + the number of the detection that started it). Queries change
-            # nothing, so a replay of the same detections publishes the same ids.
-            object_id = -(1 + track.lineage)
+            # below the publishing threshold and asked for (min_existence): a tentative
+            # id, TENTATIVE_IDS + 1 + the number of the detection that started it.
+            # Queries change nothing, so a replay of the same detections publishes the
+            # same ids.
+            object_id = TENTATIVE_IDS + 1 + track.lineage
         return WorldObject(
             id=object_id,
             cls=track.cls,
@@ -1352,6 +1373,7 @@ class WorldModel:
                 else None
             ),
             confidence=self.confidence_of(track, at, book) if self._mhf.mht else None,
+            tentative=tentative,
         )
 
     def confidence_of(

@@ -6,6 +6,10 @@ from dataclasses import dataclass
 
 from semwm.confidence import Confidence
 
+TENTATIVE_IDS = 1_000_000_000
+"""Ids of tentative objects (below the publishing threshold) start above this: one
+plus the number of the detection that started the object, added to it."""
+
 
 @dataclass(frozen=True)
 class WorldObject:
@@ -17,9 +21,13 @@ class WorldObject:
     maps each motion model of an IMM to its probability; ``class_probabilities`` the
     probability of each class being its true class (``mht`` model; classes below
     0.001 left out), ``cls`` being the most specific class holding half of it. ``id``
-    is stable while the object lives; an object below the publishing threshold that a
-    query asked for (``min_existence``) has a provisional negative id. ``confidence``:
-    paper 004's confidence value and state (``mht``; :mod:`semwm.confidence`).
+    is stable while the object lives. ``tentative``: the object is below the
+    publishing threshold (the knowledge's ``min_existence``) and a query asked for it
+    (a lower ``min_existence``); its id is then :data:`TENTATIVE_IDS` plus one plus the
+    number of the detection that started it (positive and stable; it answers
+    :meth:`semwm.WorldModel.object` until the object is published, and then leads to
+    the object under its published id). ``confidence``: paper 004's confidence value
+    and state (``mht``; :mod:`semwm.confidence`).
     """
 
     id: int
@@ -34,6 +42,7 @@ class WorldObject:
     mode_probabilities: dict[str, float] | None
     class_probabilities: dict[str, float] | None = None
     confidence: Confidence | None = None
+    tentative: bool = False
 
     def to_dict(self) -> dict[str, object]:
         """The fields as plain values (``cls`` as ``class``, last), what
@@ -52,6 +61,7 @@ class WorldObject:
             "mode_probabilities": None if modes is None else dict(modes),
             "class_probabilities": None if probabilities is None else dict(probabilities),
             "confidence": None if self.confidence is None else self.confidence.to_dict(),
+            "tentative": self.tentative,
             "class": self.cls,
         }
 

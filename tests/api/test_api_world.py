@@ -26,8 +26,9 @@ def test_world_holds_every_object_with_its_fields(seeded: TestClient) -> None:
     assert set(cup) == {
         "id", "class", "label", "position", "velocity", "covariance",
         "existence", "last_seen", "created", "mode_probabilities", "class_probabilities",
-        "confidence",
+        "confidence", "tentative",
     }  # fmt: skip
+    assert cup["tentative"] is False
     assert cup["class_probabilities"]["Cup"] > 0.9
     assert sum(cup["class_probabilities"].values()) == pytest.approx(1.0, abs=0.01)
     assert cup["position"] == pytest.approx([1.0, 2.0], abs=1e-6)

@@ -243,3 +243,20 @@ def test_an_object_on_the_regions_edge_is_published(offset_sigmas: float) -> Non
         wm.ingest([{"time": t, "class": "Table", "position": [3.0, 2.0, 0.74 + dz]}])
         published.append(bool([o for o in wm.world().objects if o.cls == "Table"]))
     assert all(published[2:]), published
+
+
+def test_a_tentative_object_has_a_positive_id_that_answers() -> None:
+    """Case 6: after one detection a Cup is tentative (existence about 0.09): listed with
+    a low min_existence under a positive id flagged tentative, found by that id, and
+    by it again once it is published under its own id (it was -4 and a 404)."""
+    wm = WorldModel(load_knowledge(SIM1))
+    wm.ingest([{"time": 0.0, "class": "Cup", "position": [1.0, 2.0], "source": "cam"}])
+    assert wm.world().objects == ()
+    (tentative,) = wm.world(min_existence=0.01).objects
+    assert tentative.tentative and tentative.id > 1_000_000_000
+    assert wm.object(tentative.id) == tentative
+    for k in range(1, 4):
+        wm.ingest([{"time": 0.5 * k, "class": "Cup", "position": [1.0, 2.0], "source": "cam"}])
+    (published,) = wm.world().objects
+    assert not published.tentative and published.id == 1
+    assert wm.object(tentative.id) == published
