@@ -44,6 +44,7 @@ from semwm.detection import (
     SensorReport,
 )
 from semwm.knowledge import ClassSpec, Knowledge, KnowledgeDocument, KnowledgeError, resolve
+from semwm.mhf.rates import StreamReport
 from semwm.persistence.records import (
     Record,
     action_record,
@@ -619,6 +620,12 @@ class WorldService:
     def source_statuses(self) -> list[SourceStatus]:
         with self._sources_lock:
             return self.sources.statuses()
+
+    def rate_report(self) -> list[StreamReport]:
+        """The rates the sources' data shows beside the knowledge's (per source and
+        detector; :meth:`semwm.WorldModel.rate_report`)."""
+        with self._locked():
+            return self._model.rate_report()
 
     def domain_problems(
         self, detections: Sequence[dict[str, Any]], index: Sequence[int], batch: bool

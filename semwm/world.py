@@ -55,6 +55,7 @@ from semwm.mhf.existence import inside_probability
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted
+from semwm.mhf.rates import StreamReport
 from semwm.mhf.state import Cluster, MHFState, Track
 from semwm.validation import (
     DetectionInput,
@@ -1308,6 +1309,12 @@ class WorldModel:
             objects.append(obj)
         objects.sort(key=lambda o: o.id)
         return WorldState(time=at, objects=tuple(_unique_labels(objects)))
+
+    def rate_report(self) -> list[StreamReport]:
+        """Per source and detector, the clutter and detection rates its data shows beside
+        the knowledge's, with a warning where they differ by more than 3x
+        (:meth:`semwm.mhf.rates.ObservedRates.report`)."""
+        return self._state.observed.report(self._knowledge)
 
     def object(self, object_id: int, time: float | None = None) -> WorldObject | None:
         """One object of the world by its id, or ``None``. A tentative id

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Path
@@ -11,6 +12,7 @@ from api.deps import WorldDep
 from api.errors import InvalidError
 from api.schemas import ValidationErrorOut
 from semwm.clock import MAX_CLOCK, Exchange, ExchangeError
+from semwm.mhf.rates import StreamReport
 from semwm.sources import SourceStatus
 
 router = APIRouter(tags=["sources"])
@@ -51,6 +53,31 @@ class SyncReplyOut(BaseModel):
     replied: float = Field(description="t3: when the service answered (s)")
 
 
+class StreamRatesOut(BaseModel):
+    """One detector of a source: what its data shows beside the knowledge."""
+
+    detector: str = Field(description="the detector")
+    seconds: float = Field(description="how long (s) the rates were observed over")
+    clutter_hz: float | None = Field(
+        description="false alarms per second: objects it started that died unconfirmed"
+    )
+    knowledge_clutter_hz: float = Field(description="the detector's clutter_frequency (Hz)")
+    detection_hz: dict[str, float] = Field(
+        description="per class, the rate (Hz) at which it reports an object of the class in view"
+    )
+    knowledge_detection_hz: dict[str, float] = Field(
+        description="per class, the knowledge's detection_frequency (Hz)"
+    )
+    warnings: list[str] = Field(
+        description="where the data and the knowledge differ by more than 3x (after 10 s, or "
+        "20 expected detections)"
+    )
+
+    @classmethod
+    def of(cls, report: StreamReport) -> StreamRatesOut:
+        return cls.model_validate(report.to_dict())
+
+
 class SourceOut(BaseModel):
     """One source: its clock offset (service clock = source clock + offset) and counts."""
 
@@ -71,9 +98,17 @@ class SourceOut(BaseModel):
         "another source's newest processed scan (docs/operations.md)",
     )
 
+    rates: list[StreamRatesOut] = Field(
+        default_factory=list,
+        description="per detector: the clutter and detection rates its data shows beside the "
+        "knowledge's, with a warning where they differ by more than 3x",
+    )
+
     @classmethod
-    def of(cls, status: SourceStatus) -> SourceOut:
-        return cls.model_validate(status.to_dict())
+    def of(cls, status: SourceStatus, rates: Sequence[StreamReport] = ()) -> SourceOut:
+        return cls.model_validate(
+            {**status.to_dict(), "rates": [StreamRatesOut.of(r) for r in rates]}
+        )
 
 
 class SourcesOut(BaseModel):
@@ -124,4 +159,9 @@ async def sync(
 def sources(world: WorldDep) -> SourcesOut:
     """Every source seen: clock offset and uncertainty, exchanges, detections, latest
     time, late and guard-refused counts and the last problem (``null`` when fine)."""
-    return SourcesOut(sources=[SourceOut.of(s) for s in world.source_statuses()])
+    reports: dict[str, list[StreamReport]] = {}
+    for report in world.rate_report():
+        reports.setdefault(report.source, []).append(report)
+    return SourcesOut(
+        sources=[SourceOut.of(s, reports.get(s.name or "", [])) for s in world.source_statuses()]
+    )

@@ -220,6 +220,9 @@ def simulate(args: argparse.Namespace) -> int:
     ablated = f" without {', '.join(ablations)}" if ablations else ""
     print(f"{args.name} (seed {args.seed}){ablated}, knowledge {path}: wrote {out}")
     print(format_summary(result.metrics, result.n_detections))
+    for report in getattr(result, "rates", ()):
+        for warning in report.warnings:
+            print(f"warning: source {report.source!r}: {warning}", file=sys.stderr)
     return 0
 
 

@@ -52,13 +52,17 @@ sources' clocks, which say when they look, are kept).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.special import ndtr
 
 from semwm.filters.motion import FloatArray
+
+if TYPE_CHECKING:
+    from semwm.knowledge.model import Knowledge
 
 StreamKey = tuple[str, str]
 """``(source, detector)``; the source ``""`` for detections that name none."""
@@ -130,6 +134,39 @@ class StreamCounts:
         return (self.hits + PRIOR_COUNTS * prior) / (self.expected + PRIOR_COUNTS)
 
 
+@dataclass(frozen=True, slots=True)
+class FalseAlarms:
+    """A stream's false alarms as its data shows them: lineages it started that nothing
+    has confirmed yet (``pending``), how many of those died unconfirmed
+    (``count``), and when it was first heard of (``since``, s)."""
+
+    since: float
+    pending: frozenset[int] = frozenset()
+    count: int = 0
+
+    def after(
+        self, started: Iterable[int], confirmed: Collection[int], alive: Collection[int]
+    ) -> FalseAlarms:
+        """After a scan: ``started`` lineages become pending, ``confirmed`` ones (a later
+        detection took them) leave the pending set, and pending ones no longer
+        ``alive`` count as false alarms."""
+        still = self.pending - set(confirmed)
+        dead = {lineage for lineage in still if lineage not in alive}
+        return FalseAlarms(
+            self.since, frozenset((still - dead) | set(started)), self.count + len(dead)
+        )
+
+
+RATE_WARNING_FACTOR = 3.0
+"""The data's rate and the knowledge's differ by more than this: a warning."""
+
+MIN_EVIDENCE_SECONDS = 10.0
+"""A stream's clutter rate is judged after this long (s)."""
+
+MIN_EVIDENCE_SCANS = 20.0
+"""A stream's detection rate of a class is judged after this many expected detections."""
+
+
 @dataclass(frozen=True)
 class ObservedRates:
     """What the sources' streams say about detection rates; immutable, one per state.
@@ -142,6 +179,53 @@ class ObservedRates:
     sources: Mapping[str, SourceClock] = field(default_factory=dict)
     streams: Mapping[CountKey, StreamCounts] = field(default_factory=dict)
     seen: Mapping[int, Mapping[StreamKey, float]] = field(default_factory=dict)
+    false_alarms: Mapping[StreamKey, FalseAlarms] = field(default_factory=dict)
+
+    def report(self, knowledge: Knowledge) -> list[StreamReport]:
+        """Per stream, the clutter and detection rates its data shows beside the
+        knowledge's, with a warning where they differ by more than
+        :data:`RATE_WARNING_FACTOR` (a datasheet's numbers are often wrong)."""
+        reports = []
+        for (source, detector), alarms in sorted(self.false_alarms.items()):
+            clock = self.sources.get(source)
+            spec = knowledge.detectors.get(detector)
+            if clock is None or spec is None:
+                continue
+            span = clock.last_time - alarms.since
+            clutter = alarms.count / span if span > 0 else None
+            warnings = []
+            judged = clutter is not None and span >= MIN_EVIDENCE_SECONDS
+            if judged and clutter is not None and _differs(clutter, spec.clutter_frequency):
+                warnings.append(
+                    f"clutter: {clutter:.3g} Hz in the data, {spec.clutter_frequency:g} Hz "
+                    f"in the knowledge (detector {detector!r}'s clutter_frequency)"
+                )
+            detection: dict[str, float] = {}
+            for (s, d, cls), counts in sorted(self.streams.items()):
+                if s != source or d != detector or cls not in knowledge.classes:
+                    continue
+                known = knowledge.classes[cls].detection_frequency
+                g = self.rate((s, d), cls, known)
+                detection[cls] = g
+                if counts.expected >= MIN_EVIDENCE_SCANS and _differs(g, known):
+                    warnings.append(
+                        f"detection of {cls}: {g:.3g} Hz in the data, {known:g} Hz in the "
+                        "knowledge (its detection_frequency)"
+                    )
+            known_rates = {c: knowledge.classes[c].detection_frequency for c in detection}
+            reports.append(
+                StreamReport(
+                    source,
+                    detector,
+                    span,
+                    clutter,
+                    spec.clutter_frequency,
+                    detection,
+                    known_rates,
+                    tuple(warnings),
+                )
+            )
+        return reports
 
     def rate(self, stream: StreamKey, cls: str = "", class_rate: float | None = None) -> float:
         """``g``: the stream's observed rate per object of class ``cls`` in view (Hz); 0
@@ -380,7 +464,52 @@ class ObservedRates:
             ):
                 if lineage in alive:
                     seen[lineage] = {**seen.get(lineage, {}), stream: time}
-        return ObservedRates(sources, streams, seen)
+        alarms = dict(self.false_alarms)
+        confirmed = {lineage for lineages in detected.values() for lineage in lineages}
+        for detector in {*detected, *born, *(born_elsewhere or {})}:
+            alarms.setdefault((source, detector), FalseAlarms(time))
+        for stream_key, before in list(alarms.items()):
+            if stream_key[0] != source:
+                continue
+            by = stream_key[1]
+            new_lineages = (*born.get(by, ()), *(born_elsewhere or {}).get(by, ()))
+            alarms[stream_key] = before.after(new_lineages, confirmed, alive)
+        return ObservedRates(sources, streams, seen, alarms)
+
+
+@dataclass(frozen=True)
+class StreamReport:
+    """One stream's rates: what its data shows (``clutter`` Hz over ``seconds``;
+    ``detection`` Hz per class) beside the knowledge's, and the warnings."""
+
+    source: str
+    detector: str
+    seconds: float
+    clutter: float | None
+    knowledge_clutter: float
+    detection: Mapping[str, float]
+    knowledge_detection: Mapping[str, float]
+    warnings: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "detector": self.detector,
+            "seconds": self.seconds,
+            "clutter_hz": self.clutter,
+            "knowledge_clutter_hz": self.knowledge_clutter,
+            "detection_hz": dict(self.detection),
+            "knowledge_detection_hz": dict(self.knowledge_detection),
+            "warnings": list(self.warnings),
+        }
+
+
+def _differs(observed: float, known: float) -> bool:
+    """More than :data:`RATE_WARNING_FACTOR` apart (either way; a zero against a
+    positive rate differs)."""
+    if known <= 0.0 or observed <= 0.0:
+        return (known <= 0.0) != (observed <= 0.0)
+    ratio = observed / known
+    return ratio > RATE_WARNING_FACTOR or ratio < 1.0 / RATE_WARNING_FACTOR
 
 
 def hull_distance(points: FloatArray, corners: FloatArray) -> FloatArray:

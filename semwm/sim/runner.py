@@ -24,6 +24,7 @@ from tqdm import tqdm
 from semwm.detection import Detection
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
+from semwm.mhf.rates import StreamReport
 from semwm.sim.metrics import Metrics, Point, compute_metrics, unobserved_floor
 from semwm.sim.scenarios import Scenario, TruthFrame
 from semwm.world_types import WorldObject, WorldState
@@ -62,6 +63,9 @@ class RunResult:
     metrics: Metrics
     scan_seconds: list[float]
     scan_sizes: list[int]
+    rates: tuple[StreamReport, ...] = ()
+    """Per source and detector, the clutter and detection rates the data showed beside
+    the knowledge's (:meth:`semwm.WorldModel.rate_report`; empty for a model without)."""
 
     @property
     def n_detections(self) -> int:
@@ -152,7 +156,9 @@ def run_scenario(
         compatible=taxonomy_of(knowledge).compatible,
     )
     metrics = replace(metrics, time_per_detection=_timing(seconds, sizes))
-    return RunResult(scenario, knowledge, worlds, metrics, seconds, sizes)
+    report = getattr(model, "rate_report", None)
+    rates = tuple(report()) if callable(report) else ()
+    return RunResult(scenario, knowledge, worlds, metrics, seconds, sizes, rates)
 
 
 def scenario_gospa_c(scenario: Scenario) -> float:
@@ -212,6 +218,7 @@ def write_run(result: RunResult, out_dir: str | Path, *, ablations: Sequence[str
             objects = [_object_dict(o) for o in state.objects]
             f.write(json.dumps({"time": frame.time, "objects": objects}) + "\n")
     document = metrics_document(result, ablations)
+    document["rates"] = [{"source": r.source, **r.to_dict()} for r in result.rates]
     (out / "metrics.json").write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     plot_run(result.scenario, result.worlds, result.metrics, out / "plot.png")
     return out

@@ -152,3 +152,15 @@ def test_unknown_class_lists_the_known_ones(seeded: TestClient) -> None:
     message = seeded.get("/world", params={"class": "Mug"}).json()["detail"][0]["msg"]
     for name in ("Can", "CokeCan", "BeerCan", "Cup", "Robot"):
         assert name in message
+
+
+def test_sources_report_the_rates_their_data_shows(seeded: TestClient) -> None:
+    """GET /sources: per source and detector, the data's rates beside the knowledge's."""
+    body = seeded.get("/sources").json()
+    rates = [r for s in body["sources"] for r in s["rates"]]
+    assert rates, body
+    first = rates[0]
+    assert {"detector", "clutter_hz", "knowledge_clutter_hz", "detection_hz", "warnings"} <= set(
+        first
+    )
+    assert first["seconds"] >= 0.0

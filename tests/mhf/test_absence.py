@@ -260,3 +260,20 @@ def test_a_tentative_object_has_a_positive_id_that_answers() -> None:
     (published,) = wm.world().objects
     assert not published.tentative and published.id == 1
     assert wm.object(tentative.id) == published
+
+
+@pytest.mark.parametrize(("false_positives", "warned"), [(0.2, False), (0.6, True), (0.05, True)])
+def test_rates_the_data_contradicts_are_reported(false_positives: float, warned: bool) -> None:
+    """The datasheet says 0.2 false positives per frame (2 Hz); data with 3x or 1/4 of
+    that is measured (false alarms: objects started that died unconfirmed) and warned
+    about; data as the datasheet says is not."""
+    from semwm.sim.runner import run_scenario
+    from semwm.sim.scenarios import make_scenario
+
+    knowledge = load_knowledge(Path(__file__).parents[2] / "benchmarks/knowledge/datasheet.yaml")
+    scenario = make_scenario("datasheet", 0, false_positives_per_frame=false_positives)
+    result = run_scenario(scenario, knowledge, progress=False)
+    (report,) = result.rates
+    assert report.detector == "overhead" and report.knowledge_clutter == 2.0
+    assert report.clutter == pytest.approx(10 * false_positives, rel=0.35)
+    assert any(w.startswith("clutter:") for w in report.warnings) == warned
