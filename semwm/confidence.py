@@ -191,4 +191,5 @@ def view_of(
         range=spec.range,
         half_angle=half,
         looking_at=looking_at,
+        detector=detector,
     )

@@ -223,11 +223,16 @@ def looked_at(
     seen: Collection[int],
     existence: Mapping[int, float],
     knowledge: Knowledge,
+    observed: Mapping[str, float] | None = None,
 ) -> tuple[dict[int, float], dict[int, float]]:
     """Negative information of one scan: the existence of every predicted version after
     the scan did not report it, and the log missed-detection likelihood of each.
 
-    The detection probability is state-dependent: ``P_D(class) * P(in view)``
+    The detection probability is state-dependent: ``P_D(class) * P(in view)``, with
+    P_D the class's ``detection_probability``, or (``observed``, per class) the one the
+    scan's stream is observed to have (:meth:`semwm.mhf.rates.StreamCounts.detection_probability`,
+    whose prior is the class's: a datasheet's recall that the data contradicts does not
+    make every miss count as more, or less, than it is)
     (:func:`in_view_probability`; 1 for objects flagged ``looking_at``), so an object
     outside the view is unchanged. Versions in ``seen`` (a detection of this scan fell
     in their gate) are left to the association: one of its children explains them.
@@ -240,7 +245,7 @@ def looked_at(
         [
             0.0
             if t.key in seen
-            else knowledge.classes[t.cls].detection_probability
+            else _detection_probability(t.cls, knowledge, observed)
             * (1.0 if t.lineage in view.looking_at else float(inside[i]))
             for i, t in enumerate(tracks)
         ]
@@ -251,3 +256,14 @@ def looked_at(
     return dict(zip(keys, r_new.tolist(), strict=True)), dict(
         zip(keys, log_q.tolist(), strict=True)
     )
+
+
+def _detection_probability(
+    cls: str, knowledge: Knowledge, observed: Mapping[str, float] | None
+) -> float:
+    """P_D of an object of class ``cls`` for one scan: observed, else the class's."""
+    if observed is not None:
+        value = observed.get(cls)
+        if value is not None:
+            return value
+    return knowledge.classes[cls].detection_probability

@@ -355,7 +355,14 @@ class MultipleHypothesisFilter:
                 if isinstance(option, DetectionOptions)
                 for k in option.existing
             }
-            r_view, log_q_view = looked_at(view, predicted, seen, table.existence, self.knowledge)
+            r_view, log_q_view = looked_at(
+                view,
+                predicted,
+                seen,
+                table.existence,
+                self.knowledge,
+                self._view_detection(state.observed, view) if self.observed_rates else None,
+            )
             table.existence.update(r_view)
             clusters = self.undetected(clusters, log_q_view, table.tracks)
         book = _ClusterBook(clusters)
@@ -395,6 +402,17 @@ class MultipleHypothesisFilter:
         if (self.observed_rates or self.missed_detections) and measurements:
             observed = self._observe(observed, state.tracks, options, final, table, time)
         return MHFState(final, tracks, time, table.next_key, kept, observed)
+
+    def _view_detection(self, observed: ObservedRates, view: SensorView) -> dict[str, float]:
+        """Per class, the per-scan detection probability the view's stream is observed to
+        have (prior: the class's ``detection_probability``)."""
+        source = view.source or ""
+        result = {}
+        for (s, d, cls), counts in observed.streams.items():
+            if s == source and d == view.detector and cls in self.knowledge.classes:
+                prior = self.knowledge.classes[cls].detection_probability
+                result[cls] = counts.detection_probability(prior)
+        return result
 
     def _coverage(self, measurements: Sequence[Measurement]) -> ScanCoverage:
         """What the scan (no sensor view) tells about where its source looked."""

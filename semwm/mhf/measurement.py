@@ -39,7 +39,7 @@ class SensorView:
     ``position`` ``(2,)`` (m) and ``heading`` (rad) in the horizontal plane;
     ``range`` (m) and ``half_angle`` (rad) bound the view (``None``: unbounded);
     ``looking_at``: lineages of objects flagged as looked at (in view whatever their
-    position).
+    position); ``detector``: the scan's detector.
     """
 
     time: float
@@ -49,3 +49,4 @@ class SensorView:
     range: float | None
     half_angle: float | None
     looking_at: frozenset[int] = frozenset()
+    detector: str | None = None
