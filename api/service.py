@@ -58,6 +58,7 @@ from semwm.sources import (
     TimeGuardError,
 )
 from semwm.team import LocalModel
+from semwm.validation import ClassesHeld
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 
 T = TypeVar("T")
@@ -824,24 +825,20 @@ class WorldService:
             return Committed((knowledge, written), self._commit)
 
     def _replace_knowledge(self, knowledge: Knowledge, what: str) -> None:
-        """Use ``knowledge``; 409 if tracked objects hold a class it lacks."""
-        held: dict[str, set[int | None]] = {}
-        for hypothesis in self._model.hypotheses(max(1, self._model.hypothesis_count)):
-            for obj in hypothesis.objects:
-                if obj.cls not in knowledge.classes:
-                    held.setdefault(obj.cls, set()).add(obj.id)
-        if held:
+        """Use ``knowledge``; 409 if tracked objects hold a class it lacks (the model
+        checks per cluster: :meth:`WorldModel.replace_knowledge`)."""
+        try:
+            self._model.replace_knowledge(knowledge, refuse_held=True)
+        except ClassesHeld as error:
             named = "; ".join(
                 f"{cls} (objects {', '.join(str(i) for i in sorted(i for i in ids if i))}"
                 f"{' and unpublished ones' if None in ids else ''})"
-                for cls, ids in sorted(held.items())
+                for cls, ids in sorted(error.held.items())
             )
             raise ConflictError(
                 f"{what} removes classes that tracked objects hold: {named}; nothing changed. "
                 "Keep these classes, or POST /reset first"
-            )
-        try:
-            self._model.replace_knowledge(knowledge)
+            ) from None
         except ValueError as error:
             raise ConflictError(f"{what} conflicts with the tracked objects: {error}") from None
 
