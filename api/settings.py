@@ -115,6 +115,9 @@ class Settings(BaseSettings):
     max_client_connections
         Connections one client (peer address) may hold; one more is answered 503
         and closed (a proxy in front makes every client one: raise it there).
+    max_waiting
+        Writes waiting for the world beyond which a new one is answered 503 with
+        ``Retry-After`` at once (the service fell behind; docs/api.md, "Overload").
     stream_lifetime, stream_send_timeout
         A ``GET /world/stream`` ends after ``stream_lifetime`` s (an ``EventSource``
         reconnects by itself); a client that does not read one frame for
@@ -168,6 +171,7 @@ class Settings(BaseSettings):
     limit_concurrency: Annotated[int, Field(ge=1)] = 256
     timeout_request: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 10.0
     max_client_connections: Annotated[int, Field(ge=1)] = 128
+    max_waiting: Annotated[int, Field(ge=1)] = 64
     stream_lifetime: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 3600.0
     stream_send_timeout: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 10.0
     http: Literal["auto", "h11", "httptools"] = "auto"

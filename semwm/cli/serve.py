@@ -126,7 +126,7 @@ def add_persistence_options(parser: argparse.ArgumentParser) -> None:
 SAFETY_OPTIONS = (
     "token", "token_file", "read_token", "insecure", "cors_origins", "allowed_hosts",
     "max_body", "max_sources", "stuck_after", "max_client_connections", "stream_lifetime",
-    "stream_send_timeout",
+    "stream_send_timeout", "max_waiting",
 )  # fmt: skip
 
 
@@ -167,6 +167,11 @@ def add_safety_options(parser: argparse.ArgumentParser) -> None:
         "--stream-send-timeout",
         type=float,
         help="s a /world/stream client may read nothing before it is dropped (10)",
+    )
+    group.add_argument(
+        "--max-waiting",
+        type=int,
+        help="writes waiting for the world beyond which new ones get 503 + Retry-After (64)",
     )
 
 
