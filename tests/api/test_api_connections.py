@@ -62,11 +62,23 @@ def _all_probes_answer(url: str, source: str = "127.0.0.1", rounds: int = 10) ->
     assert answers == [200] * len(answers)
 
 
+HOLDS = {
+    "idle": b"",
+    "slow headers": b"GET /health HTTP/1.1\r\nHost: 127.0.0.1\r\n",
+    "slow bodies": b"POST /detections HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+    b"Content-Type: application/json\r\nContent-Length: 1000\r\n\r\n{",
+    "streams": b"GET /world/stream HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n",
+}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("http", ["h11", "httptools"])
-def test_one_client_holding_300_idle_connections_does_not_shut_the_service(http: str) -> None:
+@pytest.mark.parametrize("kind", list(HOLDS))
+def test_one_client_holding_300_connections_does_not_shut_the_service(http: str, kind: str) -> None:
+    """Idle, slow headers, slow bodies or SSE streams (never read), 300 of them, with
+    the default 10 s deadline: every probe is answered meanwhile."""
     settings = Settings(knowledge=SIM1, port=0, http=http)
-    with running_server(settings) as url, _held(_port(url), 300):
+    with running_server(settings) as url, _held(_port(url), 300, send=HOLDS[kind]):
         time.sleep(0.3)
         _all_probes_answer(url)  # from the flooding client's own address, too
         assert _probe(url, "/world", "127.0.0.2") == 200  # another client is served
