@@ -256,6 +256,7 @@ class WorldService:
         self.retry_after = 5  # s: Retry-After of a write the store refused
         self.storage_refusals = 0
         self.max_waiting = 64  # writes queued for the world beyond which new ones get 503
+        self.hypothesis_objects = 100_000  # the most objects one GET /hypotheses lists
         self.shed = 0  # writes refused so (since start)
         self.dropped_late = 0  # scans of 'late: drop' sources dropped (since start)
         # the damage the data directory's last start found: problems, [first, last] lost
@@ -727,14 +728,23 @@ class WorldService:
         return found
 
     def hypotheses(self, limit: int) -> tuple[dict[str, Any], list[HypothesisSummary]]:
-        """The counts (stored, clusters, log10 of the joint) and the best hypotheses."""
+        """The counts (stored, clusters, log10 of the joint), the limit applied and the
+        best hypotheses.
+
+        Each hypothesis lists every object it holds, so the answer's size (and the time
+        it holds the world) grows with ``limit`` times the objects: the limit applied
+        is lowered so that the answer lists at most :attr:`hypothesis_objects` objects
+        (issue 30; the search itself costs the same for any number of clusters)."""
         with self._locked():
+            objects = max(1, self._model.object_count)
+            applied = max(1, min(limit, self.hypothesis_objects // objects))
             counts = {
                 "total": self._model.hypothesis_count,
                 "clusters": self._model.cluster_count,
                 "log10_joint": self._model.log10_joint_hypotheses,
+                "limit": applied,
             }
-            return counts, list(self._model.hypotheses(limit))
+            return counts, list(self._model.hypotheses(applied))
 
     def health(self) -> dict[str, Any]:
         """A summary of the world as of the last commit; never waits for the lock."""

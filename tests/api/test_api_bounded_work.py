@@ -118,3 +118,17 @@ def test_a_class_edit_never_enumerates_global_hypotheses(
     with pytest.raises(ClassesHeld) as held:
         model.replace_knowledge(resolve(without, None), refuse_held=True)
     assert set(held.value.held) == {"Cup"} and len(held.value.held["Cup"]) >= 300
+
+
+def test_the_limit_applied_keeps_the_answer_bounded_in_objects() -> None:
+    model = _ambiguous_world(120)  # 120 objects published (the MAP: each cup moved)
+    service = WorldService(model)
+    service.hypothesis_objects = 1000
+    with TestClient(make_app(service)) as client:
+        answer = client.get("/hypotheses", params={"limit": 1000}).json()
+        objects = model.object_count
+        assert objects == 120 and answer["limit"] == 1000 // objects == 8
+        assert len(answer["hypotheses"]) == answer["limit"]
+        assert sum(len(h["objects"]) for h in answer["hypotheses"]) <= 1000 + objects
+        small = client.get("/hypotheses", params={"limit": 2}).json()
+        assert small["limit"] == 2 and len(small["hypotheses"]) == 2
