@@ -89,6 +89,7 @@ def create_app(settings: Settings, *, fast_ingest: bool = True) -> FastAPI:
                 idempotency_keys=settings.idempotency_keys,
                 stuck_after=settings.stuck_after,
             )
+            app.state.world.max_waiting = settings.max_waiting
             logger.info(
                 "world model built from %s (engine %s)",
                 settings.knowledge,

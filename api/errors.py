@@ -59,6 +59,17 @@ class StorageUnavailable(ApiError):
         self.headers = {"Retry-After": str(retry_after)}
 
 
+class Overloaded(ApiError):
+    """503 with ``Retry-After``: the service is behind (too many requests wait for the
+    world); nothing was applied, the request may be sent again as it is."""
+
+    status = 503
+
+    def __init__(self, message: str, retry_after: int) -> None:
+        super().__init__(message)
+        self.headers = {"Retry-After": str(retry_after)}
+
+
 class InvalidError(ApiError):
     """422 with one ``{"loc", "msg", "type"}`` item per problem, like FastAPI's own."""
 

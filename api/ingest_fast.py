@@ -104,6 +104,8 @@ class FastIngest:
         ]
         if committed.replayed:
             headers.append((b"idempotent-replayed", b"true"))
+        if committed.dropped:
+            headers.append((b"x-semwm-dropped", b"late"))
         await send({"type": "http.response.start", "status": 200, "headers": headers})
         await send({"type": "http.response.body", "body": body})
 

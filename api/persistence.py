@@ -30,20 +30,24 @@ def attach_persistence(app: FastAPI, settings: Settings) -> Iterator[None]:
     app.state.durable = None
     with ExitStack() as stack:
         if service is not None and settings.data_dir is not None:
-            from semwm.persistence import DurableWorld
+            from semwm.persistence import DurableWorld, StoreError
 
-            durable = DurableWorld.open(
-                settings.data_dir,
-                service.knowledge,
-                reorder_window=settings.reorder_window,
-                hold=settings.hold,
-                sync=settings.sync,
-                snapshot_every=settings.snapshot_every,
-                compact_every=settings.compact_every,
-                on_damage=settings.on_damage,
-                knowledge_from=settings.knowledge_from
-                or ("journal" if settings.write_back else "refuse"),
-            )
+            try:
+                durable = DurableWorld.open(
+                    settings.data_dir,
+                    service.knowledge,
+                    reorder_window=settings.reorder_window,
+                    hold=settings.hold,
+                    sync=settings.sync,
+                    snapshot_every=settings.snapshot_every,
+                    compact_every=settings.compact_every,
+                    on_damage=settings.on_damage,
+                    knowledge_from=settings.knowledge_from
+                    or ("journal" if settings.write_back else "refuse"),
+                )
+            except StoreError as error:  # the operator's message, before the server's trace
+                logger.error("not starting: %s", error)
+                raise
             stack.callback(durable.close)
             service.use_model(durable.model)
             _write_back_journal_knowledge(service, durable.model.knowledge, settings)

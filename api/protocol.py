@@ -12,6 +12,18 @@ The deadline is a mixin over both of uvicorn's HTTP/1.1 implementations: httptoo
 (pure Python). Both set ``self.cycle`` to a new request-response cycle once a
 request's headers are complete, and call ``on_response_complete`` when its response
 is sent; that is all the mixin relies on.
+
+Issue 30 added three limits, since one client holding 300 connections (idle, slow
+headers, slow bodies or streams) kept ``/health`` at 503:
+
+* the deadline covers the whole request, headers and body: a connection whose body is
+  still arriving when it runs out is closed too (a request whose body is in is never
+  cut, however long its answer takes);
+* one client (one peer address) holds at most ``max_per_client`` connections; those
+  beyond do not count towards ``limit_concurrency``, get :data:`OVER_CAP_SECONDS` for
+  their request, and only a probe is served on them (anything else is 503);
+* ``GET /health`` and ``GET /ready`` are served when every slot of
+  ``limit_concurrency`` is taken (uvicorn answers every other request 503 then).
 """
 
 from __future__ import annotations
@@ -32,6 +44,7 @@ if TYPE_CHECKING:
 
         loop: asyncio.AbstractEventLoop
         transport: asyncio.Transport
+        connections: set[Any]
         logger: logging.Logger
         cycle: Any
 
@@ -51,7 +64,25 @@ class HeaderDeadline(_UvicornHTTPProtocol):
     """Seconds a client has to send a request's headers (set per server, see
     :func:`with_header_deadline`)."""
 
+    max_per_client: int | None = None
+    """Connections one peer address may hold (set per server)."""
+    _clients: dict[str, int] = {}  # noqa: RUF012 - per server: with_header_deadline's class
+    _peer: str | None = None
+    _over = False  # beyond max_per_client: uncounted, probes only
+    _limit: int | None = None
     _deadline: asyncio.TimerHandle | None = None
+
+    @property
+    def limit_concurrency(self) -> int | None:
+        """uvicorn's limit, read when a request's headers are in: none for the probes."""
+        scope = getattr(self, "scope", None)
+        if scope is not None and scope.get("method") == "GET" and scope.get("path") in PROBES:
+            return None
+        return 0 if self._over else self._limit  # 0: uvicorn answers 503
+
+    @limit_concurrency.setter
+    def limit_concurrency(self, value: int | None) -> None:
+        self._limit = value
 
     def _arm(self) -> None:
         """Start the clock for the next request's headers."""
@@ -61,7 +92,10 @@ class HeaderDeadline(_UvicornHTTPProtocol):
             # a pipelined request already in (its headers complete) is being served: its
             # own response re-arms the clock when it is sent
             return
-        self._deadline = self.loop.call_later(self.timeout_request, self._too_slow, waiting_since)
+        seconds = self.timeout_request
+        if self._over:
+            seconds = min(seconds, OVER_CAP_SECONDS)
+        self._deadline = self.loop.call_later(seconds, self._too_slow, waiting_since)
 
     def _disarm(self) -> None:
         if self._deadline is not None:
@@ -70,12 +104,25 @@ class HeaderDeadline(_UvicornHTTPProtocol):
 
     def _too_slow(self, waiting_since: object) -> None:
         self._deadline = None
-        if self.cycle is waiting_since and not self.transport.is_closing():
+        if self.transport.is_closing():
+            return
+        cycle = self.cycle
+        if cycle is waiting_since:
             self.logger.info("closing a connection that sent no complete request headers in time")
+            self.transport.close()
+        elif cycle is not None and cycle.more_body:
+            self.logger.info("closing a connection whose request body did not arrive in time")
             self.transport.close()
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
+        peer = transport.get_extra_info("peername")
+        self._peer = str(peer[0]) if isinstance(peer, tuple) and peer else ""
+        held = self._clients.get(self._peer, 0) + 1
+        self._clients[self._peer] = held
+        if self.max_per_client is not None and held > self.max_per_client:
+            self._over = True
+            self.connections.discard(self)  # takes no slot: serves a probe, else 503
         self._arm()
 
     def on_response_complete(self) -> None:
@@ -85,7 +132,20 @@ class HeaderDeadline(_UvicornHTTPProtocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm()
+        if self._peer is not None:
+            left = self._clients.get(self._peer, 1) - 1
+            if left > 0:
+                self._clients[self._peer] = left
+            else:
+                self._clients.pop(self._peer, None)
+            self._peer = None
         super().connection_lost(exc)
+
+
+PROBES = frozenset({"/health", "/ready"})
+"""Paths served past ``limit_concurrency`` (liveness and readiness must answer)."""
+OVER_CAP_SECONDS = 1.0
+"""Seconds a connection beyond its client's bound has for a request."""
 
 
 class HeaderDeadlineH11Protocol(HeaderDeadline, H11Protocol):
@@ -107,7 +167,14 @@ def protocol_class(http: HttpImplementation = "auto") -> type[HeaderDeadline]:
     return HeaderDeadlineHttpToolsProtocol
 
 
-def with_header_deadline(seconds: float, http: HttpImplementation = "auto") -> type[HeaderDeadline]:
-    """The protocol class for a server whose clients get ``seconds`` for their headers."""
+def with_header_deadline(
+    seconds: float, http: HttpImplementation = "auto", max_per_client: int | None = None
+) -> type[HeaderDeadline]:
+    """The protocol class for a server whose clients get ``seconds`` for a request (headers
+    and body) and hold at most ``max_per_client`` connections each."""
     base = protocol_class(http)
-    return type(base.__name__, (base,), {"timeout_request": seconds})
+    return type(
+        base.__name__,
+        (base,),
+        {"timeout_request": seconds, "max_per_client": max_per_client, "_clients": {}},
+    )

@@ -357,6 +357,11 @@ class HypothesesOut(BaseModel):
     log10_joint: float = Field(
         description="log10 of the number of global hypotheses (combinations of the clusters')."
     )
+    limit: int | None = Field(
+        default=None,
+        description="The limit applied: the one asked, or fewer so that the answer lists at "
+        "most 100,000 objects (each hypothesis lists all it holds).",
+    )
     hypotheses: list[HypothesisOut] = Field(description="the most probable ones, best first")
 
 

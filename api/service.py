@@ -29,6 +29,7 @@ from api.errors import (
     KnowledgeFileError,
     Loc,
     NotFoundError,
+    Overloaded,
     StorageUnavailable,
     validation_items,
 )
@@ -54,12 +55,14 @@ from semwm.persistence.records import (
 )
 from semwm.sources import (
     DEFAULT_ORDER_TOLERANCE,
+    Placement,
     SourceRegistry,
     SourceStatus,
     TimeGuard,
     TimeGuardError,
 )
 from semwm.team import LocalModel
+from semwm.validation import ClassesHeld
 from semwm.world import IgnoredDetection
 from semwm.world_types import HypothesisSummary, WorldObject, WorldState
 
@@ -122,6 +125,7 @@ class Committed(Generic[T]):
     value: T
     commit: int
     replayed: bool = False
+    dropped: bool = False  # a late scan of a 'late: drop' source: nothing applied
 
 
 def _save(model: WorldModel) -> dict[str, Any]:
@@ -256,6 +260,10 @@ class WorldService:
         self.storage_probe: Callable[[], bool] | None = None  # can the store write again?
         self.retry_after = 5  # s: Retry-After of a write the store refused
         self.storage_refusals = 0
+        self.max_waiting = 64  # writes queued for the world beyond which new ones get 503
+        self.hypothesis_objects = 100_000  # the most objects one GET /hypotheses lists
+        self.shed = 0  # writes refused so (since start)
+        self.dropped_late = 0  # scans of 'late: drop' sources dropped (since start)
         # the damage the data directory's last start found: problems, [first, last] lost
         self.store_damage: tuple[list[str], list[int] | None] | None = None
 
@@ -443,8 +451,23 @@ class WorldService:
         the first time, and nothing is applied again. ``wait`` false: raise
         :class:`WorldBusy` (nothing applied) rather than wait for the world's lock.
         """
+        self._shed_if_behind()
         with self._locked(self._scan_order(detections, sensor), wait):
             return self._ingest_locked(detections, batch, key, sensor)
+
+    def _shed_if_behind(self) -> None:
+        """503 with Retry-After when ``max_waiting`` writes already wait for the world:
+        a queue that long means the service fell behind, and waiting longer would only
+        make their scans late (replayed, or refused as too old: a storm, issue 30)."""
+        waiting = self._lock.waiting
+        if waiting >= self.max_waiting:
+            self.shed += 1
+            raise Overloaded(
+                f"the service is behind: {waiting} requests wait for the world (the bound is "
+                f"{self.max_waiting}); nothing was applied; retry after 1 s, or drop late "
+                'scans (PUT /sources/NAME/policy {"late": "drop"})',
+                retry_after=1,
+            )
 
     def _ingest_locked(
         self,
@@ -479,6 +502,12 @@ class WorldService:
                     sensor = {**sensor, "time": placed_time}
         except TimeGuardError as error:
             raise InvalidError(_time_items(error, batch)) from error
+        if self._late_to_drop(placement):
+            with self._sources_lock:
+                self.sources.dropped(placement)
+            self.dropped_late += 1
+            dropped = IngestResult(applied=0, time=self._model.latest_time)
+            return Committed(dropped, self._commit, dropped=True)
         placed = [
             d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
         ]
@@ -528,6 +557,23 @@ class WorldService:
             while len(self._recent) > self.idempotency_keys:
                 self._recent.popitem(last=False)
         return committed
+
+    def _late_to_drop(self, placement: Placement) -> bool:
+        """Whether a batch is late (older than the newest scan processed: it would be
+        replayed, or refused) and every source of it asked for late scans to be
+        dropped (``PUT /sources/NAME/policy {"late": "drop"}``)."""
+        newest = self._model.processed_time
+        if newest is None or self._model.hold != 0 or not placement.counts:
+            return False
+        with self._sources_lock:
+            if not all(self.sources.drops_late(s) for s in placement.counts):
+                return False
+        times = [
+            t
+            for d in placement.detections
+            if isinstance(t := (d.time if isinstance(d, Detection) else d.get("time")), float | int)
+        ]
+        return bool(times) and min(times) < newest
 
     def _check_sources(self, detections: Sequence[dict[str, Any]], batch: bool) -> None:
         """Hold at most ``max_sources`` distinct sources (422 for a new one beyond)."""
@@ -616,6 +662,19 @@ class WorldService:
         """Add a finished sync exchange of source ``name`` (422 naming a bad time)."""
         with self._sources_lock:
             return self.sources.sync(name, exchange)
+
+    def set_late_policy(self, name: str, late: str) -> SourceStatus:
+        """Source ``name``'s scans older than the newest processed one: ``replay`` them
+        (the default; older than the reorder window: 409) or ``drop`` them (200,
+        nothing applied, header ``X-Semwm-Dropped: late``)."""
+        with self._sources_lock:
+            known = len(self.sources.statuses())
+            if self.sources.status(name) is None and known >= self.max_sources:
+                raise InvalidError.one(
+                    ("path", "name"),
+                    f"the service holds at most {self.max_sources} sources and has {known}",
+                )
+            return self.sources.set_late_policy(name, late)
 
     def source_statuses(self) -> list[SourceStatus]:
         with self._sources_lock:
@@ -712,14 +771,23 @@ class WorldService:
         return found
 
     def hypotheses(self, limit: int) -> tuple[dict[str, Any], list[HypothesisSummary]]:
-        """The counts (stored, clusters, log10 of the joint) and the best hypotheses."""
+        """The counts (stored, clusters, log10 of the joint), the limit applied and the
+        best hypotheses.
+
+        Each hypothesis lists every object it holds, so the answer's size (and the time
+        it holds the world) grows with ``limit`` times the objects: the limit applied
+        is lowered so that the answer lists at most :attr:`hypothesis_objects` objects
+        (issue 30; the search itself costs the same for any number of clusters)."""
         with self._locked():
+            objects = max(1, self._model.object_count)
+            applied = max(1, min(limit, self.hypothesis_objects // objects))
             counts = {
                 "total": self._model.hypothesis_count,
                 "clusters": self._model.cluster_count,
                 "log10_joint": self._model.log10_joint_hypotheses,
+                "limit": applied,
             }
-            return counts, list(self._model.hypotheses(limit))
+            return counts, list(self._model.hypotheses(applied))
 
     def health(self) -> dict[str, Any]:
         """A summary of the world as of the last commit; never waits for the lock."""
@@ -868,24 +936,20 @@ class WorldService:
             return Committed((knowledge, written), self._commit)
 
     def _replace_knowledge(self, knowledge: Knowledge, what: str) -> None:
-        """Use ``knowledge``; 409 if tracked objects hold a class it lacks."""
-        held: dict[str, set[int | None]] = {}
-        for hypothesis in self._model.hypotheses(max(1, self._model.hypothesis_count)):
-            for obj in hypothesis.objects:
-                if obj.cls not in knowledge.classes:
-                    held.setdefault(obj.cls, set()).add(obj.id)
-        if held:
+        """Use ``knowledge``; 409 if tracked objects hold a class it lacks (the model
+        checks per cluster: :meth:`WorldModel.replace_knowledge`)."""
+        try:
+            self._model.replace_knowledge(knowledge, refuse_held=True)
+        except ClassesHeld as error:
             named = "; ".join(
                 f"{cls} (objects {', '.join(str(i) for i in sorted(i for i in ids if i))}"
                 f"{' and unpublished ones' if None in ids else ''})"
-                for cls, ids in sorted(held.items())
+                for cls, ids in sorted(error.held.items())
             )
             raise ConflictError(
                 f"{what} removes classes that tracked objects hold: {named}; nothing changed. "
                 "Keep these classes, or POST /reset first"
-            )
-        try:
-            self._model.replace_knowledge(knowledge)
+            ) from None
         except ValueError as error:
             raise ConflictError(f"{what} conflicts with the tracked objects: {error}") from None
 

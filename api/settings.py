@@ -108,9 +108,20 @@ class Settings(BaseSettings):
         beyond this many connections at once new ones get 503 (slow clients cannot
         hold every worker).
     timeout_request
-        A connection must send a request's complete headers within this many
-        seconds of opening (or of the previous response), else it is closed: idle
-        or byte-by-byte (slowloris) clients cannot fill ``limit_concurrency``.
+        A connection must send a request's complete headers and body within this
+        many seconds of opening (or of the previous response), else it is closed:
+        idle, byte-by-byte (slowloris) or slow-body clients cannot fill
+        ``limit_concurrency``. ``GET /health`` and ``/ready`` are served past it.
+    max_client_connections
+        Connections one client (peer address) may hold; one more is answered 503
+        and closed (a proxy in front makes every client one: raise it there).
+    max_waiting
+        Writes waiting for the world beyond which a new one is answered 503 with
+        ``Retry-After`` at once (the service fell behind; docs/api.md, "Overload").
+    stream_lifetime, stream_send_timeout
+        A ``GET /world/stream`` ends after ``stream_lifetime`` s (an ``EventSource``
+        reconnects by itself); a client that does not read one frame for
+        ``stream_send_timeout`` s is dropped.
     http
         uvicorn's HTTP/1.1 implementation: ``httptools`` (C parser, less CPU per
         request), ``h11`` (pure Python), or ``auto``: httptools when installed.
@@ -164,6 +175,10 @@ class Settings(BaseSettings):
     timeout_keep_alive: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 5.0
     limit_concurrency: Annotated[int, Field(ge=1)] = 256
     timeout_request: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 10.0
+    max_client_connections: Annotated[int, Field(ge=1)] = 128
+    max_waiting: Annotated[int, Field(ge=1)] = 64
+    stream_lifetime: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 3600.0
+    stream_send_timeout: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 10.0
     http: Literal["auto", "h11", "httptools"] = "auto"
 
     @model_validator(mode="after")
@@ -199,7 +214,9 @@ class Settings(BaseSettings):
             "timeout_keep_alive": self.timeout_keep_alive,
             "limit_concurrency": self.limit_concurrency,
             "h11_max_incomplete_event_size": 64 * 1024,
-            "http": with_header_deadline(self.timeout_request, self.http),
+            "http": with_header_deadline(
+                self.timeout_request, self.http, self.max_client_connections
+            ),
         }
 
     def bind_problem(self) -> str | None:

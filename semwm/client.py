@@ -20,6 +20,8 @@ from __future__ import annotations
 import contextlib
 import http.client
 import json
+import math
+import random
 import threading
 import time
 import urllib.parse
@@ -65,6 +67,15 @@ class Client:
     idle_reconnect
         Open a new connection when the last one was idle this long (s); keep it below
         the service's keep-alive timeout.
+    busy_retries
+        An answer 429 or 503 with ``Retry-After`` (the service is behind, or holds
+        its limits: nothing was applied) is sent again up to this many times, after
+        ``Retry-After`` s times a random factor in [1, 1.5) (jitter: clients told to
+        come back together do not all come back at once). 0: raise at once.
+    max_wait
+        The longest wait one ``Retry-After`` may impose (s).
+    rng, sleep
+        The jitter's random generator and the wait (tests pass their own).
     """
 
     def __init__(
@@ -74,6 +85,10 @@ class Client:
         token: str | None = None,
         timeout: float = 10.0,
         idle_reconnect: float = 4.0,
+        busy_retries: int = 3,
+        max_wait: float = 30.0,
+        rng: random.Random | None = None,
+        sleep: Callable[[float], None] = time.sleep,
     ) -> None:
         url = urllib.parse.urlsplit(base_url)
         if url.scheme not in ("http", "https") or not url.hostname:
@@ -84,6 +99,12 @@ class Client:
         self.prefix = url.path.rstrip("/")
         self.timeout = timeout
         self.idle_reconnect = idle_reconnect
+        self.busy_retries = busy_retries
+        self.max_wait = max_wait
+        self._rng = rng or random.Random()
+        self._sleep = sleep
+        self.waited = 0.0
+        """Seconds waited on ``Retry-After`` answers so far."""
         self.headers = {"content-type": "application/json", "accept": "application/json"}
         if token is not None:
             self.headers["authorization"] = f"Bearer {token}"
@@ -118,10 +139,30 @@ class Client:
         """
         body = None if payload is None else json.dumps(payload, separators=(",", ":")).encode()
         response = self._exchange(method, path, body, headers, retry)
+        for _ in range(self.busy_retries):
+            wait = self._retry_after(response)
+            if wait is None:
+                break
+            self._sleep(wait)
+            self.waited += wait
+            response = self._exchange(method, path, body, headers, retry)
         answer = json.loads(response.body) if response.body else None
         if response.status >= 400:
             raise ServiceError(response.status, answer)
         return answer
+
+    def _retry_after(self, response: Answer) -> float | None:
+        """The jittered wait a 429/503 answer asks for, ``None`` for any other."""
+        if response.status not in (429, 503):
+            return None
+        value = dict(response.headers).get("retry-after")
+        try:
+            seconds = float(value) if value is not None else None
+        except ValueError:
+            return None
+        if seconds is None or not math.isfinite(seconds) or seconds < 0.0:
+            return None  # absent, an HTTP date or nonsense: no wait asked for
+        return min(seconds, self.max_wait) * (1.0 + 0.5 * self._rng.random())
 
     def get_text(self, path: str) -> str:
         """``GET path`` answered in text, e.g. ``/metrics`` (Prometheus' format).

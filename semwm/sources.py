@@ -47,6 +47,9 @@ from semwm.detection import MAX_TIME_STD, Detection
 
 DetectionLike = Detection | Mapping[str, Any]
 
+LATE_POLICIES = ("replay", "drop")
+"""What a source asks for its scans older than the newest processed one (issue 30)."""
+
 DEFAULT_ORDER_TOLERANCE = 0.005
 """Seconds (the service's default): below a team's clock agreement (paper 003 syncs
 clocks over a wireless network, with latencies of tens of milliseconds), so scans
@@ -110,6 +113,8 @@ class SourceStatus:
     refused: int
     problem: str | None
     in_arrival_order: int = 0
+    late_policy: str = "replay"
+    dropped: int = 0
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -125,6 +130,8 @@ class SourceStatus:
             "refused": self.refused,
             "problem": self.problem,
             "in_arrival_order": self.in_arrival_order,
+            "late_policy": self.late_policy,
+            "dropped": self.dropped,
         }
 
 
@@ -138,6 +145,8 @@ class _Record:
     refused: int = 0
     problem: str | None = None
     in_arrival_order: int = 0  # scans placed in arrival order (concurrent with another's)
+    late_policy: str = "replay"  # or "drop": its scans older than the newest processed
+    dropped: int = 0  # detections dropped as late (late_policy "drop")
 
 
 @dataclass(frozen=True)
@@ -455,6 +464,24 @@ class SourceRegistry:
             record.late += count
             record.problem = message
 
+    def set_late_policy(self, name: str, late: str) -> SourceStatus:
+        """What happens to ``name``'s late scans: ``replay`` or ``drop`` (see
+        :meth:`dropped`)."""
+        if late not in LATE_POLICIES:
+            raise ValueError(f"late must be one of {', '.join(LATE_POLICIES)}; got {late!r}")
+        record = self._record(name)
+        record.late_policy = late
+        return self._status(name, record)
+
+    def drops_late(self, name: str | None) -> bool:
+        record = self._records.get(name)
+        return record is not None and record.late_policy == "drop"
+
+    def dropped(self, placement: Placement) -> None:
+        """Count a placed batch dropped as late (its sources asked for it)."""
+        for source, count in placement.counts.items():
+            self._record(source).dropped += count
+
     def forget_times(self) -> None:
         """Drop every source's time reference (the world was reset); clocks stay."""
         for record in self._records.values():
@@ -479,6 +506,8 @@ class SourceRegistry:
             refused=record.refused,
             problem=record.problem,
             in_arrival_order=record.in_arrival_order,
+            late_policy=record.late_policy,
+            dropped=record.dropped,
         )
 
     def status(self, name: str | None = None) -> SourceStatus | None:

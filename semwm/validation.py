@@ -19,6 +19,17 @@ from semwm.mhf.measurement import Measurement
 DetectionInput = Detection | Mapping[str, Any]
 
 
+class ClassesHeld(ValueError):
+    """New knowledge lacks classes that tracked objects hold; nothing was changed.
+
+    ``held`` maps each such class to the ids of its published objects (``None``
+    stands for unpublished ones)."""
+
+    def __init__(self, held: Mapping[str, set[int | None]]) -> None:
+        self.held = {cls: set(ids) for cls, ids in held.items()}
+        super().__init__(f"tracked objects hold classes the knowledge lacks: {sorted(self.held)}")
+
+
 def as_batch(detections: DetectionInput | Iterable[DetectionInput]) -> list[DetectionInput]:
     """One detection or an iterable of them, as a list."""
     if isinstance(detections, Detection | Mapping):

@@ -13,6 +13,7 @@ changes nothing.
 
 from __future__ import annotations
 
+import heapq
 import math
 from bisect import bisect_left, bisect_right
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -58,6 +59,7 @@ from semwm.mhf.predict import Predicted
 from semwm.mhf.rates import StreamReport
 from semwm.mhf.state import Cluster, MHFState, Track
 from semwm.validation import (
+    ClassesHeld,
     DetectionInput,
     as_batch,
     check,
@@ -390,9 +392,17 @@ class WorldModel:
         """Distinct object versions stored, shared by all hypotheses."""
         return len(self._state.tracks)
 
-    def replace_knowledge(self, knowledge: Knowledge) -> None:
+    def replace_knowledge(self, knowledge: Knowledge, *, refuse_held: bool = False) -> None:
         """Use new knowledge from the next detection on. Objects of classes it no longer
-        has are removed; the reorder window restarts (no replay across the change)."""
+        has are removed; the reorder window restarts (no replay across the change).
+
+        ``refuse_held``: raise :class:`~semwm.validation.ClassesHeld` instead, naming
+        the classes and objects, when tracked objects (in any stored hypothesis) hold a
+        class the knowledge lacks. The work is per cluster and per stored object
+        version, never per global hypothesis (issue 30: a class edit that enumerated
+        them took 272 s). Held scans are released first; a caller that must change
+        nothing on a refusal restores the model (the service does).
+        """
         if knowledge.world.dimension != self._knowledge.world.dimension:
             raise ValueError(
                 f"the new knowledge has dimension {knowledge.world.dimension}; the world has "
@@ -400,6 +410,16 @@ class WorldModel:
             )
         MultipleHypothesisFilter(knowledge)  # fail here, before anything changes
         self._release(everything=True)  # held scans were accepted under the old knowledge
+        if refuse_held:
+            held: dict[str, set[int | None]] = {}
+            tracks = self._state.tracks
+            for cluster in self._state.clusters:
+                for key in cluster.keys:
+                    track = tracks[key]
+                    if track.cls not in knowledge.classes:
+                        held.setdefault(track.cls, set()).add(self._ids.get(track.lineage))
+            if held:
+                raise ClassesHeld(held)
         gone = {k for k, t in self._state.tracks.items() if t.cls not in knowledge.classes}
         old_names = self._mhf.associator.class_model.names
         self._set_knowledge(knowledge)
@@ -1392,7 +1412,20 @@ class WorldModel:
         return Confidence(value, state_of(value, spec))
 
     def hypotheses(self, k: int = 10) -> list[HypothesisSummary]:
-        """The ``k`` most probable hypotheses with their probabilities and objects."""
+        """The ``k`` most probable hypotheses with their probabilities and objects.
+
+        k-best of the product of the clusters' sorted hypothesis lists, best first. A
+        global hypothesis is the best one with some clusters moved to a lower rank,
+        written as its changes ``((position, rank), ...)`` over the clusters that have
+        alternatives, ordered by the cost of their first step down (``position`` in
+        that order). Each combination has one parent, and at most three children,
+        none more probable than it: the last change one rank lower; a change at the
+        next position; a last change of rank 1 moved to the next position (its step
+        costs no less, by the order). So a best-first search pops them in order with
+        work O(C + k (log k + n)) for C clusters and n objects, not O(k C): only the
+        ``k + 1`` cheapest first steps are ever sorted (issue 30: ``limit=1000`` over
+        2,822 clusters took 110 s).
+        """
         if k < 1:
             raise ValueError(f"k must be at least 1; got {k}")
         if self._pending:  # every accepted detection included, nothing committed
@@ -1400,26 +1433,63 @@ class WorldModel:
                 return self.hypotheses(k)
         state = self._state
         dim = self._knowledge.world.dimension
+        best = state.best
+        steps = [
+            (c.hypotheses[0].log_weight - c.hypotheses[1].log_weight, index)
+            for index, c in enumerate(state.clusters)
+            if len(c.hypotheses) > 1
+        ]
+        multi = [state.clusters[i].hypotheses for _, i in heapq.nsmallest(k + 1, steps)]
+        first_step = [h[0].log_weight - h[1].log_weight for h in multi]
+        found: list[tuple[float, frozenset[int]]] = []
+        heap: list[tuple[float, int, tuple[tuple[int, int], ...]]] = [(-best.log_weight, 0, ())]
+        counter = 0
+        while heap and len(found) < k:
+            negative, _, changes = heapq.heappop(heap)
+            tracks = set(best.tracks)
+            for position, rank in changes:
+                tracks -= multi[position][0].tracks
+                tracks |= multi[position][rank].tracks
+            found.append((-negative, frozenset(tracks)))
+            children: list[tuple[float, tuple[tuple[int, int], ...]]] = []
+            last = changes[-1][0] if changes else -1
+            if changes:
+                position, rank = changes[-1]
+                options = multi[position]
+                if rank + 1 < len(options):  # the last change one rank lower
+                    step = options[rank].log_weight - options[rank + 1].log_weight
+                    children.append((negative + step, (*changes[:-1], (position, rank + 1))))
+                if rank == 1 and position + 1 < len(multi):  # moved to the next position
+                    step = first_step[position + 1] - first_step[position]
+                    children.append((negative + step, (*changes[:-1], (position + 1, 1))))
+            if last + 1 < len(multi):  # a change at the next position
+                children.append((negative + first_step[last + 1], (*changes, (last + 1, 1))))
+            for weight, child in children:
+                counter += 1
+                heapq.heappush(heap, (weight, counter, child))
+        positions: dict[int, tuple[float, ...]] = {}  # each version's position, once
         summaries = []
-        for h in state.top(k):
+        for log_weight, keys in found:
             objects = []
-            for key in sorted(h.tracks):
+            for key in sorted(keys):
                 track = state.tracks[key]
-                x, _ = _summary_position(track, dim)
+                x = positions.get(key)
+                if x is None:
+                    x = positions[key] = tuple(float(v) for v in _summary_position(track, dim)[0])
                 objects.append(
                     HypothesisObject(
                         id=self._ids.get(track.lineage),
                         track=track.lineage,
                         cls=track.cls,
                         label=track.label,
-                        position=tuple(float(v) for v in x),
+                        position=x,
                         existence=state.existence.get(key, 1.0),
                     )
                 )
             summaries.append(
                 HypothesisSummary(
-                    probability=math.exp(h.log_weight),
-                    log10_probability=h.log_weight / math.log(10.0),
+                    probability=math.exp(log_weight),
+                    log10_probability=log_weight / math.log(10.0),
                     objects=tuple(objects),
                 )
             )

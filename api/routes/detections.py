@@ -186,6 +186,8 @@ async def post_detections(
     headers = {COMMIT_HEADER: str(committed.commit)}
     if committed.replayed:
         headers["Idempotent-Replayed"] = "true"
+    if committed.dropped:  # a late scan of a 'late: drop' source (issue 30)
+        headers["X-Semwm-Dropped"] = "late"
     result = committed.value
     answer = ingest_out(result)
     return Response(answer.model_dump_json(), media_type="application/json", headers=headers)

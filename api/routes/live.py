@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import asyncio
+import logging
 from collections.abc import AsyncIterator
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, StreamingResponse
+from starlette.types import Send
 
+from api.deps import SettingsDep
 from api.feed import WorldFeed
+
+logger = logging.getLogger("api")
 
 router = APIRouter(tags=["live"])
 
@@ -39,14 +45,15 @@ def live_page() -> FileResponse:
     response_class=StreamingResponse,
     responses={200: {"content": {"text/event-stream": {}}, "description": "An endless stream"}},
 )
-async def world_stream(feed: FeedDep) -> StreamingResponse:
+async def world_stream(feed: FeedDep, settings: SettingsDep) -> StreamingResponse:
     """Server-Sent Events: ``knowledge`` first, then ``world`` after every change.
 
     ``world`` carries the whole world as ``GET /world`` does, plus ``hypotheses``,
     ``rate`` (detections/s) and the ``detections`` applied since the previous
     event; at most 10 per second. ``stats`` comes every 2 s while nothing changes.
     Read it with ``curl -N``, a browser's ``EventSource`` or any SSE client; the
-    format is in docs/api.md.
+    format is in docs/api.md. A stream ends after ``--stream-lifetime`` (reconnect),
+    and a client that stops reading is dropped after ``--stream-send-timeout``.
     """
 
     async def frames() -> AsyncIterator[str]:
@@ -54,8 +61,46 @@ async def world_stream(feed: FeedDep) -> StreamingResponse:
             while (frame := await queue.get()) is not None:
                 yield frame
 
-    return StreamingResponse(
+    return BoundedStream(
         frames(),
+        lifetime=settings.stream_lifetime,
+        send_timeout=settings.stream_send_timeout,
         media_type="text/event-stream",
         headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
     )
+
+
+class BoundedStream(StreamingResponse):
+    """A streaming response with a lifetime, that drops a client which does not read.
+
+    Under flow control a client that stops reading makes each ``send`` wait for the
+    socket to drain, for ever: the stream (and its connection slot) was never freed
+    (issue 30). Each frame now has ``send_timeout`` s to go out; the stream ends
+    cleanly after ``lifetime`` s.
+    """
+
+    def __init__(
+        self, content: AsyncIterator[str], *, lifetime: float, send_timeout: float, **options: Any
+    ) -> None:
+        super().__init__(content, **options)
+        self.lifetime = lifetime
+        self.send_timeout = send_timeout
+
+    async def stream_response(self, send: Send) -> None:
+        await send(
+            {"type": "http.response.start", "status": self.status_code, "headers": self.raw_headers}
+        )
+        loop = asyncio.get_running_loop()
+        ends = loop.time() + self.lifetime
+        async for chunk in self.body_iterator:
+            body = chunk if isinstance(chunk, bytes | memoryview) else chunk.encode(self.charset)
+            message = {"type": "http.response.body", "body": body, "more_body": True}
+            try:
+                await asyncio.wait_for(send(message), self.send_timeout)
+            except TimeoutError:
+                # returning unfinished makes the server close the connection
+                logger.info("dropping a stream client that read nothing in %g s", self.send_timeout)
+                return
+            if loop.time() >= ends:
+                break
+        await send({"type": "http.response.body", "body": b"", "more_body": False})

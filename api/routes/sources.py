@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Body, Path
 from pydantic import BaseModel, ConfigDict, Field
@@ -92,6 +92,12 @@ class SourceOut(BaseModel):
     late: int = Field(description="detections refused as older than the reorder window")
     refused: int = Field(description="detections refused by a time guard")
     problem: str | None = Field(description="why its last detections were refused, if they were")
+    late_policy: Literal["replay", "drop"] = Field(
+        default="replay",
+        description="its scans older than the newest processed one: replayed, or dropped "
+        "(PUT /sources/NAME/policy)",
+    )
+    dropped: int = Field(default=0, description="detections dropped as late (policy drop)")
     in_arrival_order: int = Field(
         default=0,
         description="scans processed in arrival order: at most --order-tolerance older than "
@@ -153,6 +159,41 @@ async def sync(
     except ExchangeError as error:
         raise InvalidError.one(("body", error.field), str(error)) from error
     return SourceOut.of(world.sync(name, exchange))
+
+
+_POLICY_EXAMPLES: dict[str, Any] = {
+    "drop": {"summary": "Drop late scans (the next supersedes them)", "value": {"late": "drop"}},
+    "replay": {"summary": "Replay late scans (the default)", "value": {"late": "replay"}},
+}
+
+
+class PolicyIn(BaseModel):
+    """What the service does with a source's late scans."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    late: Literal["replay", "drop"] = Field(
+        description="A scan older than the newest the world processed: 'replay' it (the "
+        "default: the world goes back and processes the later scans again; older than the "
+        "reorder window: 409), or 'drop' it (200 with nothing applied and the header "
+        "X-Semwm-Dropped: late): a source whose next scan supersedes a late one."
+    )
+
+
+@router.put(
+    "/sources/{name}/policy",
+    response_model=SourceOut,
+    summary="A source's policy for late scans (replay or drop)",
+    responses={422: {"model": ValidationErrorOut, "description": "Not a policy"}},
+)
+def put_policy(
+    world: WorldDep,
+    name: Annotated[str, Path(min_length=1, max_length=200)],
+    body: Annotated[PolicyIn, Body(openapi_examples=_POLICY_EXAMPLES)],
+) -> SourceOut:
+    """Set what happens to the source's late scans; answers the source as ``GET
+    /sources`` shows it."""
+    return SourceOut.of(world.set_late_policy(name, body.late))
 
 
 @router.get("/sources", response_model=SourcesOut, summary="Sources: clocks, counts, problems")

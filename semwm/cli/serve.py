@@ -141,7 +141,8 @@ def add_persistence_options(parser: argparse.ArgumentParser) -> None:
 
 SAFETY_OPTIONS = (
     "token", "token_file", "read_token", "insecure", "cors_origins", "allowed_hosts",
-    "max_body", "max_sources", "stuck_after",
+    "max_body", "max_sources", "stuck_after", "max_client_connections", "stream_lifetime",
+    "stream_send_timeout", "max_waiting",
 )  # fmt: skip
 
 
@@ -172,6 +173,22 @@ def add_safety_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--max-body", type=int, help="largest request body, bytes (4 MiB)")
     group.add_argument("--max-sources", type=int, help="most distinct sources held (1000)")
     group.add_argument("--stuck-after", type=float, help="s before /ready says stuck (30)")
+    group.add_argument(
+        "--max-client-connections",
+        type=int,
+        help="connections one client address may hold (128; raise it behind a proxy)",
+    )
+    group.add_argument("--stream-lifetime", type=float, help="s before a /world/stream ends (3600)")
+    group.add_argument(
+        "--stream-send-timeout",
+        type=float,
+        help="s a /world/stream client may read nothing before it is dropped (10)",
+    )
+    group.add_argument(
+        "--max-waiting",
+        type=int,
+        help="writes waiting for the world beyond which new ones get 503 + Retry-After (64)",
+    )
 
 
 MQTT_OPTIONS = ("mqtt", "mqtt_prefix", "mqtt_world_rate", "mqtt_client_id")

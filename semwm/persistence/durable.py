@@ -44,7 +44,7 @@ from semwm.persistence.records import (
 )
 from semwm.persistence.replay import Replayer, model_digest
 from semwm.persistence.snapshot import SnapshotMismatch, restore_snapshot, take_snapshot
-from semwm.validation import DetectionInput, as_batch
+from semwm.validation import ClassesHeld, DetectionInput, as_batch
 from semwm.world import IngestResult, WorldModel
 
 logger = logging.getLogger("semwm.persistence")
@@ -76,16 +76,6 @@ def knowledge_difference(journal: KnowledgeDocument, given: KnowledgeDocument) -
         if getattr(journal, name) != getattr(given, name):
             parts.append(f"{name} differ")
     return "; ".join(parts) or "the documents differ"
-
-
-def classes_held(model: WorldModel, knowledge: Knowledge) -> set[str]:
-    """Classes of tracked objects (in any stored hypothesis) that ``knowledge`` lacks."""
-    return {
-        obj.cls
-        for hypothesis in model.hypotheses(max(1, model.hypothesis_count))
-        for obj in hypothesis.objects
-        if obj.cls not in knowledge.classes
-    }
 
 
 ON_DAMAGE: tuple[str, ...] = ("refuse", "truncate")
@@ -239,21 +229,23 @@ class DurableWorld:
                 "to the file, or with --knowledge-from file to apply the file (as POST "
                 "/knowledge/reload would: objects of classes it lacks refuse it)"
             )
-        held = classes_held(self.model, knowledge)
-        if held:
+        difference = knowledge_difference(journal.document, knowledge.document)
+        try:
+            with self._undoable(knowledge_record(knowledge)):
+                self.model.replace_knowledge(knowledge, refuse_held=True)
+        except ClassesHeld as error:
             raise KnowledgeConflict(
                 f"{self.journal.data_dir}: the knowledge file {knowledge.source or ''} removes "
-                f"classes that tracked objects hold: {', '.join(sorted(held))}; nothing was "
-                "changed. Keep these classes in the file, or start with --write-back to keep "
-                "the journal's knowledge"
-            )
+                f"classes that tracked objects hold: {', '.join(sorted(error.held))}; nothing "
+                "was changed. Keep these classes in the file, or start with --write-back to "
+                "keep the journal's knowledge"
+            ) from None
         self.recovery.knowledge_changed = True
         logger.warning(
-            "%s: the knowledge file differs from the journal's (%s); applying it",
+            "%s: the knowledge file differs from the journal's (%s); applied it",
             self.journal.path,
-            knowledge_difference(journal.document, knowledge.document),
+            difference,
         )
-        self.replace_knowledge(knowledge)
 
     # -- changes ---------------------------------------------------------------------------
     @contextmanager

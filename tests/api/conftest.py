@@ -42,3 +42,9 @@ def seeded(client: TestClient) -> TestClient:
         response = client.post("/detections", json={"detections": scene(step * 0.5)})
         assert response.status_code == 200, response.text
     return client
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers", "slow: a fault-injection test of several seconds (runs in CI all the same)"
+    )
