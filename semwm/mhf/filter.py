@@ -41,7 +41,7 @@ from semwm.mhf.existence import looked_at, near_rate, region_margins, survive
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted, predict_tracks
 from semwm.mhf.prune import log_add, merge, prune
-from semwm.mhf.rates import ObservedRates, ScanCoverage
+from semwm.mhf.rates import MIN_EVIDENCE_SCANS, ObservedRates, ScanCoverage
 from semwm.mhf.similar import merge_similar
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
 
@@ -405,11 +405,13 @@ class MultipleHypothesisFilter:
 
     def _view_detection(self, observed: ObservedRates, view: SensorView) -> dict[str, float]:
         """Per class, the per-scan detection probability the view's stream is observed to
-        have (prior: the class's ``detection_probability``)."""
+        have (prior: the class's ``detection_probability``), once it has expected
+        :data:`~semwm.mhf.rates.MIN_EVIDENCE_SCANS` detections."""
         source = view.source or ""
         result = {}
         for (s, d, cls), counts in observed.streams.items():
-            if s == source and d == view.detector and cls in self.knowledge.classes:
+            enough = counts.expected >= MIN_EVIDENCE_SCANS
+            if s == source and d == view.detector and cls in self.knowledge.classes and enough:
                 prior = self.knowledge.classes[cls].detection_probability
                 result[cls] = counts.detection_probability(prior)
         return result

@@ -30,4 +30,6 @@ def test_people_who_swapped_lineages_are_not_shown_twice(seed: int) -> None:
         close = np.argwhere(np.triu(gaps < 0.02, 1))
         twice += [(world.time, world.objects[a].id, world.objects[b].id) for a, b in close]
     assert twice == []  # (time, id, id) of objects shown on one spot
-    assert result.metrics.id_switches <= {6: 28, 12: 13}[seed]  # was 30 and 15
+    # was 30 and 15, then 28 and 13; issue 28's missed-detection model gives 32 and 12
+    # (door_exits over 20 seeds: 268 switches against 258, GOSPA 0.2578 against 0.2581)
+    assert result.metrics.id_switches <= {6: 32, 12: 13}[seed]
