@@ -46,17 +46,23 @@ AROUND = [  # a table and two cans around the cup at (1, 1)
 ]
 
 
-def test_a_source_that_keeps_looking_there_removes_what_is_gone() -> None:
-    """A camera (no pose) reports a Cup among a table and two cans; the Cup is taken
-    away and the camera goes on reporting the others: the Cup lies between things it
-    sees (inside the convex hull of its detections: a view is convex), so its scans
-    are misses for the Cup, and the Cup leaves the world."""
+def _cup_among_others() -> tuple[WorldModel, float]:
+    """A camera (no pose) has reported a Cup among AROUND for 4 s; the next scan's time."""
     wm = WorldModel(load_knowledge(SIM1))
     t = 0.0
     for _ in range(20):
         cup = {"time": t, "class": "Cup", "position": [1.0, 1.0], "source": "cam"}
         wm.ingest([cup, *({**o, "time": t, "source": "cam"} for o in AROUND)])
         t = round(t + 0.2, 6)
+    return wm, t
+
+
+def test_a_source_that_keeps_looking_there_removes_what_is_gone() -> None:
+    """A camera (no pose) reports a Cup among a table and two cans; the Cup is taken
+    away and the camera goes on reporting the others: the Cup lies between things it
+    sees (inside the convex hull of its detections: a view is convex), so its scans
+    are misses for the Cup, and the Cup leaves the world."""
+    wm, t = _cup_among_others()
     assert _cup(wm)[0].existence > 0.9
     removed_at = t
     while t < removed_at + 5.0:
@@ -70,12 +76,7 @@ def test_a_source_that_keeps_looking_there_removes_what_is_gone() -> None:
 def test_a_source_that_looks_beside_an_object_does_not_miss_it() -> None:
     """The same camera then reports only the table beside the cup (it turned a little):
     the cup is not between things it sees, so nothing says it could see the cup."""
-    wm = WorldModel(load_knowledge(SIM1))
-    t = 0.0
-    for _ in range(20):
-        cup = {"time": t, "class": "Cup", "position": [1.0, 1.0], "source": "cam"}
-        wm.ingest([cup, *({**o, "time": t, "source": "cam"} for o in AROUND)])
-        t = round(t + 0.2, 6)
+    wm, t = _cup_among_others()
     for _ in range(25):
         wm.ingest([{**AROUND[0], "time": t, "source": "cam"}])
         t = round(t + 0.2, 6)
