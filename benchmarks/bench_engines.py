@@ -12,9 +12,12 @@ For each case, both engines run the same scans in the same process, interleaved
   (robocup.yaml's ``Robot``, a 2-mode IMM with a transition period, 2-D) for N = 1,
   10, 100, 1,000: µs per call (best of ``--repeats`` loops), what crossing to Rust
   costs and gains per call;
-* the share of the CPU time spent in the filters, the part in Rust so far
-  (``ClassFilter.predict``/``update``/``combine`` and the factory's ``update``,
-  ``combine`` and gate, cumulative, from one cProfile run of robocup per engine);
+* the existence and coverage kernels alone (``semwm.mhf.kernels``): the region's and
+  the view's probability, ``survive`` and the hull distance, N = 1 to 1,000, µs per call;
+* the share of the CPU time spent in the filters (``ClassFilter.predict``/``update``/
+  ``combine`` and the factory's ``update``, ``combine`` and gate) and in the existence
+  step (``existence_at``, ``leaving``, ``undetected``), cumulative, from one cProfile
+  run of robocup per engine;
 * parity: every frame of sim1, sim2 and robocup (2 s) over ``--seeds`` seeds with both
   engines: ids, classes and labels equal, and the largest difference of any published
   number (positions, velocities, covariances, existence, mode and class probabilities).
@@ -61,7 +64,16 @@ FILTER_FUNCTIONS = {
     ("factory.py", "combine"),
     ("factory.py", "mahalanobis_squared"),
 }
-"""The entry points of what runs in Rust so far (semwm/filters/factory.py)."""
+"""The entry points of the filters, in Rust (semwm/filters/factory.py)."""
+EXISTENCE_FUNCTIONS = {
+    ("filter.py", "existence_at"),
+    ("filter.py", "leaving"),
+    ("filter.py", "undetected"),
+}
+"""The existence and missed-detection step of a scan (semwm/mhf/filter.py): its kernels
+(survive, missed, the region and view probabilities, coverage) are in Rust, the glue
+around them (per-object rates and margins, dicts of existence) and the re-weighting of
+hypotheses are Python."""
 
 
 def _with_region(knowledge: Knowledge, region: Any) -> Knowledge:
@@ -180,6 +192,54 @@ def kernels(repeats: int, engines: tuple[Engine, ...]) -> list[dict[str, Any]]:
     return rows
 
 
+def existence_kernels(repeats: int, engines: tuple[Engine, ...]) -> list[dict[str, Any]]:
+    """µs per call of the existence and coverage kernels on N objects, each engine: the
+    region's inside probability (2-D, with margins), the view's (7 x 7 Gauss-Hermite),
+    ``survive`` and the hull distance to 12 detections."""
+    import numpy as np
+
+    from semwm.mhf.kernels import existence_kernels as choose
+    from semwm.mhf.measurement import SensorView
+
+    rows = []
+    for n in KERNEL_SIZES:
+        rng = np.random.default_rng(n)
+        position = rng.uniform(-5.0, 5.0, size=(n, 2))
+        A = rng.normal(size=(n, 2, 2)) * 0.3
+        covariance = A @ np.swapaxes(A, -1, -2) + 0.01 * np.eye(2)
+        margin = np.full((n, 2), 0.1)
+        region = ((-4.0, 4.0), (-4.0, 4.0))
+        view = SensorView(0.0, None, np.zeros(2), 0.3, 4.0, 0.8)
+        r, mu, f = rng.uniform(size=n), np.full(n, 0.1), np.full(n, 2.0)
+        corners = rng.uniform(-3.0, 3.0, size=(12, 2))
+        loops = max(3, 3000 // n)
+        row: dict[str, Any] = {"n": n}
+        for engine in engines:
+            k = choose(engine)
+
+            def per_call(call: Callable[[], object], loops: int = loops) -> float:
+                best = float("inf")
+                for _ in range(repeats):
+                    start = time.perf_counter()
+                    for _ in range(loops):
+                        call()
+                    best = min(best, (time.perf_counter() - start) / loops)
+                return 1e6 * best
+
+            row[engine] = {
+                "inside_us": per_call(
+                    lambda: k.inside_probability(position, covariance, region, margin)  # noqa: B023
+                ),
+                "in_view_us": per_call(
+                    lambda: k.in_view_probability(position, covariance, view)  # noqa: B023
+                ),
+                "survive_us": per_call(lambda: k.survive(r, mu, f, 0.1)),  # noqa: B023
+                "hull_us": per_call(lambda: k.hull_distance(position, corners)),  # noqa: B023
+            }
+        rows.append(row)
+    return rows
+
+
 def filter_share(engines: tuple[Engine, ...]) -> dict[str, Any]:
     """Share of robocup's ingest CPU time inside the filter entry points (cProfile)."""
     knowledge, all_scans = _case("robocup", SCENARIOS["robocup"])
@@ -203,7 +263,16 @@ def filter_share(engines: tuple[Engine, ...]) -> dict[str, Any]:
             for (file, _, function), (primitive, _, _, _, _) in stats.items()
             if (Path(file).name, function) in FILTER_FUNCTIONS and "filters" in file
         )
-        shares[engine] = {"filters_share": inside / total, "filter_calls": calls}
+        existence = sum(
+            cumulative
+            for (file, _, function), (_, _, _, cumulative, _) in stats.items()
+            if (Path(file).name, function) in EXISTENCE_FUNCTIONS and "mhf" in file
+        )
+        shares[engine] = {
+            "filters_share": inside / total,
+            "filter_calls": calls,
+            "existence_share": existence / total,
+        }
     return shares
 
 
@@ -263,6 +332,7 @@ def run(quick: bool, repeats: int, seeds: int) -> dict[str, Any]:
         "repeats": repeats,
         "cases": cases,
         "kernels": kernels(repeats, engines),
+        "existence_kernels": existence_kernels(repeats, engines),
         "filter_share_robocup": filter_share(engines),
         "parity": parity(seeds),
     }
@@ -303,14 +373,33 @@ def markdown(doc: dict[str, Any]) -> str:
             f"| {p['predict_us'] / r['predict_us']:.1f}x | {fmt(p['update_us'])} "
             f"| {fmt(r['update_us'])} | {p['update_us'] / r['update_us']:.1f}x |"
         )
+    lines += [
+        "",
+        "The existence and coverage kernels alone, µs per call (2-D; the hull of 12 detections):",
+        "",
+        "| N objects | inside Python | inside Rust | in view Python | in view Rust "
+        "| survive Python | survive Rust | hull Python | hull Rust |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in doc.get("existence_kernels", []):
+        p, r = row["python"], row["rust"]
+        lines.append(
+            f"| {row['n']} | {fmt(p['inside_us'])} | {fmt(r['inside_us'])} "
+            f"| {fmt(p['in_view_us'])} | {fmt(r['in_view_us'])} "
+            f"| {fmt(p['survive_us'])} | {fmt(r['survive_us'])} "
+            f"| {fmt(p['hull_us'])} | {fmt(r['hull_us'])} |"
+        )
     share = doc["filter_share_robocup"]
     lines += [
         "",
-        "Share of robocup's ingest CPU time (cProfile) inside the filters, the part in "
-        "Rust so far: "
+        "Share of robocup's ingest CPU time (cProfile) inside the filters: "
         + ", ".join(
             f"{engine} {100 * s['filters_share']:.1f} % ({s['filter_calls']} calls)"
             for engine, s in share.items()
+        )
+        + "; inside the existence step (existence_at, leaving, undetected): "
+        + ", ".join(
+            f"{engine} {100 * s.get('existence_share', 0.0):.1f} %" for engine, s in share.items()
         )
         + ".",
         "",

@@ -52,7 +52,6 @@ from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf import nearby
 from semwm.mhf.actions import Kick, apply_kick
-from semwm.mhf.existence import inside_probability
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted
@@ -951,7 +950,7 @@ class WorldModel:
         x, P = _summary_position(pub.track, self._knowledge.world.dimension)
         region = self._knowledge.world.region
         margin = self._mhf.region_margins([pub.track])
-        if inside_probability(x[None], P[None], region, margin)[0] < 0.5:
+        if self._mhf.kernels.inside_probability(x[None], P[None], region, margin)[0] < 0.5:
             return False
         for relation in spec.disappearance:
             covered = self.taxonomy.covers(relation.target)
@@ -1061,7 +1060,7 @@ class WorldModel:
         if new:
             dim = self._knowledge.world.dimension
             position, covariance = _stored_positions(new, dim)
-            inside = inside_probability(
+            inside = self._mhf.kernels.inside_probability(
                 position, covariance, self._knowledge.world.region, self._mhf.region_margins(new)
             )
             for track, x, P, p in zip(

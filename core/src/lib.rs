@@ -8,6 +8,8 @@
 //! `filters::factory` (one class's filter). The Python engine is the specification;
 //! the parity tests (tests/engines/) hold these kernels to it.
 
+pub mod coverage;
 pub mod error;
+pub mod existence;
 pub mod filters;
 mod python;

@@ -19,7 +19,9 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyType;
 
+use crate::coverage;
 use crate::error::{expect_shape, KernelError, KernelResult};
+use crate::existence;
 use crate::filters::batched;
 use crate::filters::factory::{ClassTables, TransitionPeriod};
 use crate::filters::small;
@@ -493,6 +495,262 @@ fn mahalanobis_squared<'py>(
     to_numpy(py, count, distances)
 }
 
+// ------------------------------------------------ existence and coverage (semwm.mhf)
+
+/// Two `(N,)` arrays: existence and `log q`, or nodes and weights.
+type Pair<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
+
+/// `Ok` when `values` holds one value per object (`count`), else a `ValueError` naming it.
+fn same_length(name: &str, values: &[f64], count: usize) -> PyResult<()> {
+    if values.len() == count {
+        Ok(())
+    } else {
+        Err(PyValueError::new_err(format!(
+            "{name}: expected {count} values (one per object), got {}",
+            values.len()
+        )))
+    }
+}
+
+/// Existence after `dt` seconds with no detection, and `log q`
+/// (`semwm.mhf.existence.survive`): `r`, `mu`, `f` `(N,)`.
+#[pyfunction]
+fn survive<'py>(
+    py: Python<'py>,
+    r: &Bound<'py, PyArray1<f64>>,
+    mu: &Bound<'py, PyArray1<f64>>,
+    f: &Bound<'py, PyArray1<f64>>,
+    dt: f64,
+) -> PyResult<Pair<'py>> {
+    let (r, _) = values(r)?;
+    let (mu, _) = values(mu)?;
+    let (f, _) = values(f)?;
+    let count = r.len();
+    same_length("mu", &mu, count)?;
+    same_length("f", &f, count)?;
+    let (r_new, log_q) = run(py, "survive", || {
+        Ok((0..count)
+            .map(|i| existence::survive(r[i], mu[i], f[i], dt))
+            .unzip::<f64, f64, Vec<f64>, Vec<f64>>())
+    })?;
+    Ok((to_numpy(py, count, r_new)?, to_numpy(py, count, log_q)?))
+}
+
+/// Existence after a scan that could have reported each object with probability `p` and
+/// did not, and `log q` (`semwm.mhf.existence.missed`): `r`, `p` `(N,)`.
+#[pyfunction]
+fn missed<'py>(
+    py: Python<'py>,
+    r: &Bound<'py, PyArray1<f64>>,
+    p: &Bound<'py, PyArray1<f64>>,
+) -> PyResult<Pair<'py>> {
+    let (r, _) = values(r)?;
+    let (p, _) = values(p)?;
+    let count = r.len();
+    same_length("p_detect", &p, count)?;
+    let (r_new, log_q) = run(py, "missed", || {
+        Ok((0..count)
+            .map(|i| existence::missed(r[i], p[i]))
+            .unzip::<f64, f64, Vec<f64>, Vec<f64>>())
+    })?;
+    Ok((to_numpy(py, count, r_new)?, to_numpy(py, count, log_q)?))
+}
+
+/// Positions `(N, d)` and covariances `(N, d, d)`, checked.
+fn estimates(
+    position: &Bound<'_, PyArray2<f64>>,
+    covariance: &Bound<'_, PyArray3<f64>>,
+) -> PyResult<(Vec<f64>, Vec<f64>, usize, usize)> {
+    let (x, x_shape) = values(position)?;
+    let (p, p_shape) = values(covariance)?;
+    let (count, d) = (x_shape[0], x_shape[1]);
+    expect_shape("covariance", &p_shape, &[count, d, d]).map_err(shape_error)?;
+    Ok((x, p, count, d))
+}
+
+/// The probability that each object lies inside the box `[low, high]` widened by its
+/// `margin` `(N, d)` (`semwm.mhf.existence.inside_probability`): `position` `(N, d)`,
+/// `covariance` `(N, d, d)`, `low`, `high` `(d,)`. Returns `(N,)`.
+#[pyfunction]
+#[pyo3(signature = (position, covariance, low, high, margin=None))]
+fn inside_probability<'py>(
+    py: Python<'py>,
+    position: &Bound<'py, PyArray2<f64>>,
+    covariance: &Bound<'py, PyArray3<f64>>,
+    low: &Bound<'py, PyArray1<f64>>,
+    high: &Bound<'py, PyArray1<f64>>,
+    margin: Option<&Bound<'py, PyArray2<f64>>>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (x, p, count, d) = estimates(position, covariance)?;
+    let (low, low_shape) = values(low)?;
+    let (high, high_shape) = values(high)?;
+    expect_shape("region (lower corner)", &low_shape, &[d]).map_err(shape_error)?;
+    expect_shape("region (upper corner)", &high_shape, &[d]).map_err(shape_error)?;
+    let margin = match margin {
+        Some(m) => {
+            let (m, m_shape) = values(m)?;
+            expect_shape("margin", &m_shape, &[count, d]).map_err(shape_error)?;
+            Some(m)
+        }
+        None => None,
+    };
+    let result = run(py, "inside_probability", || {
+        Ok((0..count)
+            .map(|i| {
+                existence::inside_probability(
+                    &x[i * d..(i + 1) * d],
+                    &p[i * d * d..(i + 1) * d * d],
+                    &low,
+                    &high,
+                    margin.as_ref().map(|m| &m[i * d..(i + 1) * d]),
+                )
+            })
+            .collect::<Vec<f64>>())
+    })?;
+    to_numpy(py, count, result)
+}
+
+/// The probability that each object lies in a sensor's view
+/// (`semwm.mhf.existence.in_view_probability`, 7 x 7 Gauss-Hermite): `position`
+/// `(N, d)`, `covariance` `(N, d, d)`, `d >= 2`; the view's `sensor` position (its first
+/// two entries), `heading` (rad), `range` (m) and `half_angle` (rad), either `None`.
+#[pyfunction]
+#[pyo3(signature = (position, covariance, sensor, heading, range=None, half_angle=None))]
+fn in_view_probability<'py>(
+    py: Python<'py>,
+    position: &Bound<'py, PyArray2<f64>>,
+    covariance: &Bound<'py, PyArray3<f64>>,
+    sensor: &Bound<'py, PyArray1<f64>>,
+    heading: f64,
+    range: Option<f64>,
+    half_angle: Option<f64>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (x, p, count, d) = estimates(position, covariance)?;
+    let (sensor, _) = values(sensor)?;
+    if d < 2 || sensor.len() < 2 {
+        return Err(PyValueError::new_err(format!(
+            "position and sensor: expected at least 2 entries, got {d} and {}",
+            sensor.len()
+        )));
+    }
+    let view = existence::View {
+        position: [sensor[0], sensor[1]],
+        heading,
+        range,
+        half_angle,
+    };
+    let result = run(py, "in_view_probability", || {
+        (0..count)
+            .map(|i| {
+                existence::in_view_probability(
+                    &x[i * d..(i + 1) * d],
+                    &p[i * d * d..(i + 1) * d * d],
+                    d,
+                    &view,
+                )
+            })
+            .collect::<KernelResult<Vec<f64>>>()
+    })?;
+    to_numpy(py, count, result)
+}
+
+/// The nodes and weights (normalised) of the 7-point Gauss-Hermite rule the core uses.
+#[pyfunction]
+fn gauss_hermite_rule<'py>(py: Python<'py>) -> PyResult<Pair<'py>> {
+    Ok((
+        to_numpy(py, 7, existence::GH_X.to_vec())?,
+        to_numpy(py, 7, existence::GH_W.to_vec())?,
+    ))
+}
+
+/// The standard normal CDF of each value (Cephes `ndtr`, as `scipy.special.ndtr`).
+#[pyfunction]
+fn ndtr<'py>(
+    py: Python<'py>,
+    values_: &Bound<'py, PyArray1<f64>>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (v, _) = values(values_)?;
+    let count = v.len();
+    let result = run(py, "ndtr", || {
+        Ok(v.iter().map(|&a| existence::ndtr(a)).collect::<Vec<f64>>())
+    })?;
+    to_numpy(py, count, result)
+}
+
+/// Range coverage of each object (`ObservedRates.watched` with a sensor position and a
+/// range, `semwm.mhf.rates.range_coverage`): `positions` `(N, d)`, `sensor` `(k,)`,
+/// `reach` (m), `spread` `(N,)` or `None` (a hard cut).
+#[pyfunction]
+#[pyo3(signature = (positions, sensor, reach, spread=None))]
+fn range_coverage<'py>(
+    py: Python<'py>,
+    positions: &Bound<'py, PyArray2<f64>>,
+    sensor: &Bound<'py, PyArray1<f64>>,
+    reach: f64,
+    spread: Option<&Bound<'py, PyArray1<f64>>>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (x, shape) = values(positions)?;
+    let (count, d) = (shape[0], shape[1]);
+    let (sensor, _) = values(sensor)?;
+    let spread = match spread {
+        Some(s) => {
+            let (s, _) = values(s)?;
+            same_length("spread", &s, count)?;
+            Some(s)
+        }
+        None => None,
+    };
+    let result = run(py, "range_coverage", || {
+        Ok((0..count)
+            .map(|i| {
+                coverage::range_coverage(
+                    &x[i * d..(i + 1) * d],
+                    &sensor,
+                    reach,
+                    spread.as_ref().map(|s| s[i]),
+                )
+            })
+            .collect::<Vec<f64>>())
+    })?;
+    to_numpy(py, count, result)
+}
+
+/// How far each point `(N, d)` lies outside the convex hull of `corners` `(M, d)`
+/// (`semwm.mhf.rates.hull_distance`): for one corner, or for 2-D corners whose hull is
+/// not flat; `None` otherwise (3-D hulls and corners on or near one line, where the
+/// specification's qhull decides), for the caller to ask the specification.
+#[pyfunction]
+fn hull_distance<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f64>>,
+    corners: &Bound<'py, PyArray2<f64>>,
+) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+    let (x, shape) = values(points)?;
+    let (c, c_shape) = values(corners)?;
+    let (count, d) = (shape[0], shape[1]);
+    expect_shape("corners", &c_shape, &[c_shape[0], d]).map_err(shape_error)?;
+    let m = c_shape[0];
+    let result = run(py, "hull_distance", || {
+        if m == 1 {
+            return Ok(Some(
+                (0..count)
+                    .map(|i| coverage::distance(&x[i * d..(i + 1) * d], &c))
+                    .collect::<Vec<f64>>(),
+            ));
+        }
+        if d != 2 || m < 3 {
+            return Ok(None);
+        }
+        let hull: Vec<[f64; 2]> = (0..m).map(|j| [c[2 * j], c[2 * j + 1]]).collect();
+        Ok(coverage::hull_facets(&hull).map(|facets| {
+            (0..count)
+                .map(|i| coverage::outside([x[2 * i], x[2 * i + 1]], &facets))
+                .collect::<Vec<f64>>()
+        }))
+    })?;
+    result.map(|r| to_numpy(py, count, r)).transpose()
+}
+
 /// `semwm._core`: the Rust engine's kernels (see docs/engines.md).
 #[pymodule]
 #[pyo3(name = "_core")]
@@ -504,5 +762,13 @@ fn semwm_core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_function(wrap_pyfunction!(update, module)?)?;
     module.add_function(wrap_pyfunction!(combine, module)?)?;
     module.add_function(wrap_pyfunction!(mahalanobis_squared, module)?)?;
+    module.add_function(wrap_pyfunction!(survive, module)?)?;
+    module.add_function(wrap_pyfunction!(missed, module)?)?;
+    module.add_function(wrap_pyfunction!(inside_probability, module)?)?;
+    module.add_function(wrap_pyfunction!(in_view_probability, module)?)?;
+    module.add_function(wrap_pyfunction!(gauss_hermite_rule, module)?)?;
+    module.add_function(wrap_pyfunction!(ndtr, module)?)?;
+    module.add_function(wrap_pyfunction!(range_coverage, module)?)?;
+    module.add_function(wrap_pyfunction!(hull_distance, module)?)?;
     Ok(())
 }

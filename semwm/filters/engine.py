@@ -7,8 +7,9 @@ toolchain at install time) :func:`rust_core` is ``None``, the Python engine runs
 asking for ``"rust"`` raises :class:`EngineUnavailable` with the reason.
 
 So far the Rust core holds the filters (prediction, update, combination, the
-Mahalanobis gate); the hypothesis expansion and everything else runs in Python with
-either engine.
+Mahalanobis gate) and the existence and coverage kernels of the missed-detection model
+(:mod:`semwm.mhf.kernels`); the hypothesis expansion and everything else runs in Python
+with either engine.
 """
 
 from __future__ import annotations

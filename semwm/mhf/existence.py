@@ -40,6 +40,7 @@ from semwm.mhf.measurement import SensorView
 
 if TYPE_CHECKING:
     from semwm.knowledge.model import Knowledge
+    from semwm.mhf.kernels import ExistenceKernels
     from semwm.mhf.predict import Predicted
 
 Region = tuple[tuple[float, float], ...]
@@ -223,6 +224,7 @@ def looked_at(
     seen: Collection[int],
     existence: Mapping[int, float],
     knowledge: Knowledge,
+    kernels: ExistenceKernels | None = None,
     observed: Mapping[str, float] | None = None,
 ) -> tuple[dict[int, float], dict[int, float]]:
     """Negative information of one scan: the existence of every predicted version after
@@ -240,7 +242,9 @@ def looked_at(
     tracks = predicted.tracks
     if not tracks:
         return {}, {}
-    inside = in_view_probability(predicted.position, predicted.position_covariance, view)
+    in_view = in_view_probability if kernels is None else kernels.in_view_probability
+    update = missed if kernels is None else kernels.missed
+    inside = in_view(predicted.position, predicted.position_covariance, view)
     p = np.array(
         [
             0.0
@@ -251,7 +255,7 @@ def looked_at(
         ]
     )
     r = np.array([existence.get(t.key, 1.0) for t in tracks])
-    r_new, log_q = missed(r, p)
+    r_new, log_q = update(r, p)
     keys = [t.key for t in tracks]
     return dict(zip(keys, r_new.tolist(), strict=True)), dict(
         zip(keys, log_q.tolist(), strict=True)

@@ -37,7 +37,8 @@ from semwm.filters.small import largest_eigenvalue
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf.association import Associator, DetectionOptions, SettledUpdate
-from semwm.mhf.existence import looked_at, near_rate, region_margins, survive
+from semwm.mhf.existence import looked_at, near_rate, region_margins
+from semwm.mhf.kernels import existence_kernels
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted, predict_tracks
 from semwm.mhf.prune import log_add, merge, prune
@@ -122,6 +123,8 @@ class MultipleHypothesisFilter:
         self.knowledge = knowledge
         self.taxonomy = Taxonomy({name: c.parents for name, c in knowledge.classes.items()})
         self.factory = FilterFactory(knowledge, engine)
+        # survive, missed, the region and view probabilities, coverage: one engine's
+        self.kernels = existence_kernels(engine)
         self.associator = Associator(knowledge, self.factory, self.taxonomy)
         self.ratio = knowledge.world.pruning_ratio
         self.log_ratio = math.log(self.ratio) if self.ratio > 0.0 else -math.inf
@@ -136,6 +139,7 @@ class MultipleHypothesisFilter:
         self.merge_distance = world.merge_distance if self.mht else 0.0
         self.region = world.region
         self._margins: dict[str, FloatArray] = {}
+        self._last_margins: tuple[tuple[Track, ...], FloatArray] | None = None
         # per class: (P_max, longest time unseen), infinite when the class sets none
         self._limits = {
             name: (
@@ -185,6 +189,8 @@ class MultipleHypothesisFilter:
             self.region_margins(tracks),
             _unconfirmed(tracks),
             self._spread(predicted),
+            self.kernels.range_coverage,
+            self.kernels.hull_distance,
         )
         if not watched.any():
             return np.zeros(len(tracks))
@@ -208,7 +214,9 @@ class MultipleHypothesisFilter:
     def inside(self, predicted: Predicted) -> FloatArray:
         """Each predicted object's probability of being inside the region, widened by its
         class's measurement noise (:func:`semwm.mhf.existence.inside_probability`)."""
-        return predicted.inside_region(self.region, self.region_margins(predicted.tracks))
+        return predicted.inside_region(
+            self.region, self.region_margins(predicted.tracks), self.kernels.inside_probability
+        )
 
     def region_margins(self, tracks: Sequence[Track]) -> FloatArray:
         """``(N, d)``: each object's region margin (:func:`region_margins`), from its
@@ -218,6 +226,9 @@ class MultipleHypothesisFilter:
         dim = self.factory.dim
         if not tracks:
             return np.zeros((0, dim))
+        last = self._last_margins  # a scan asks for one prediction's margins up to 3 times
+        if last is not None and last[0] is tracks:
+            return last[1]
         margins = self._margins
         rows = []
         for t in tracks:
@@ -238,7 +249,10 @@ class MultipleHypothesisFilter:
                     row = np.zeros(dim)
                 margins[t.cls] = row
             rows.append(row)
-        return np.stack(rows)
+        result = np.array(rows)
+        if isinstance(tracks, tuple):  # immutable: the same tuple has the same margins
+            self._last_margins = (tracks, result)
+        return result
 
     def class_rates(self, tracks: Sequence[Track]) -> np.ndarray:
         """Each object's class ``detection_frequency`` (Hz)."""
@@ -273,14 +287,14 @@ class MultipleHypothesisFilter:
         if time > state.time:
             mu = self.leave_rates(predicted)
             if mu.any():
-                r, _ = survive(r, mu, np.zeros(len(keys)), time - state.time)
+                r, _ = self.kernels.survive(r, mu, np.zeros(len(keys)), time - state.time)
         log_q: dict[int, float] = {}
         if scan is not None and self.missed_detections:
             span = state.observed.miss_span(scan.source, time)
             if span > 0.0:
                 f = self.miss_rates(state.observed, predicted, scan)
                 if f.any():
-                    r, q = survive(r, np.zeros(len(keys)), f, span)
+                    r, q = self.kernels.survive(r, np.zeros(len(keys)), f, span)
                     log_q = dict(zip(keys, q.tolist(), strict=True))
         return dict(zip(keys, r.tolist(), strict=True)), log_q
 
@@ -361,6 +375,7 @@ class MultipleHypothesisFilter:
                 seen,
                 table.existence,
                 self.knowledge,
+                self.kernels,
                 self._view_detection(state.observed, view) if self.observed_rates else None,
             )
             table.existence.update(r_view)
@@ -888,4 +903,3 @@ def _without(
 def _unconfirmed(tracks: Sequence[Track]) -> list[bool]:
     """Per version: no detection since the one that started it."""
     return [t.last_seen <= t.created for t in tracks]
-

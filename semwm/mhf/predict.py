@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -14,6 +14,9 @@ from semwm.filters.factory import ClassFilter, FilterFactory
 from semwm.filters.motion import FloatArray
 from semwm.mhf.existence import Region, inside_probability
 from semwm.mhf.state import Track
+
+InsideKernel = Callable[[FloatArray, FloatArray, Region | None, FloatArray | None], FloatArray]
+"""The signature of :func:`~semwm.mhf.existence.inside_probability`."""
 
 IndexArray = npt.NDArray[np.intp]
 
@@ -107,13 +110,19 @@ class Predicted:
         """Each track's combined state mean ``(n,)``."""
         return self._rows(3)
 
-    def inside_region(self, region: Region | None, margin: FloatArray | None = None) -> FloatArray:
+    def inside_region(
+        self,
+        region: Region | None,
+        margin: FloatArray | None = None,
+        kernel: InsideKernel = inside_probability,
+    ) -> FloatArray:
         """Each object's probability of being inside ``region`` widened by ``margin``
-        ``(N, d)`` (:func:`semwm.mhf.existence.inside_probability`), computed once per
-        region (one caller passes one object's margins: its class's)."""
+        ``(N, d)`` (:func:`semwm.mhf.existence.inside_probability`, or the engine's
+        ``kernel``), computed once per region (one caller passes one object's margins:
+        its class's)."""
         known = self._inside.get(region)
         if known is None:
-            known = self._inside[region] = inside_probability(
+            known = self._inside[region] = kernel(
                 self.position, self.position_covariance, region, margin
             )
         return known

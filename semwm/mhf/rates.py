@@ -52,7 +52,7 @@ sources' clocks, which say when they look, are kept).
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -63,6 +63,12 @@ from semwm.filters.motion import FloatArray
 
 if TYPE_CHECKING:
     from semwm.knowledge.model import Knowledge
+
+RangeCoverage = Callable[[FloatArray, FloatArray, float, "FloatArray | None"], FloatArray]
+"""The signature of :func:`range_coverage`."""
+
+HullDistance = Callable[[FloatArray, FloatArray], FloatArray]
+"""The signature of :func:`hull_distance`."""
 
 StreamKey = tuple[str, str]
 """``(source, detector)``; the source ``""`` for detections that name none."""
@@ -118,6 +124,7 @@ class SourceClock:
     interval: float | None = None
     position: tuple[float, ...] | None = None
     speed: float = 0.0
+
 
 @dataclass(frozen=True, slots=True)
 class StreamCounts:
@@ -259,6 +266,8 @@ class ObservedRates:
         margins: FloatArray,
         unconfirmed: Sequence[bool],
         spread: FloatArray | None = None,
+        ranged: RangeCoverage | None = None,
+        hull: HullDistance | None = None,
     ) -> FloatArray:
         r"""``(N,)``: the probability that the scan could have seen each object, so that
         not reporting it is evidence that it is gone (docs/knowledge.md, "What semwm
@@ -284,20 +293,17 @@ class ObservedRates:
 
         An object another source found, or that this source found elsewhere than it
         now looks, is not watched: a scan from elsewhere is never a miss.
+
+        ``ranged`` and ``hull``: the engine's :func:`range_coverage` and
+        :func:`hull_distance` (:mod:`semwm.mhf.kernels`); these by default.
         """
+        ranged = range_coverage if ranged is None else ranged
+        hull = hull_distance if hull is None else hull
         count = len(sources)
         if count == 0:
             return np.zeros(0)
         if scan.sensor is not None and scan.reach is not None:
-            k = min(positions.shape[1], scan.sensor.shape[0])
-            offset = positions[:, :k] - scan.sensor[:k]
-            distance = np.sqrt(np.einsum("nd,nd->n", offset, offset))
-            if spread is None:
-                hard: FloatArray = (distance <= scan.reach).astype(float)
-                return hard
-            sd = np.maximum(spread, 1e-9)
-            inside: FloatArray = ndtr((scan.reach - distance) / sd)
-            return inside
+            return ranged(positions, scan.sensor, scan.reach, spread)
         if scan.fixed:
             return np.ones(count)
         source = scan.source
@@ -309,7 +315,7 @@ class ObservedRates:
         if scan.positions.shape[0]:
             rows = np.flatnonzero(by_source)
             d = min(positions.shape[1], scan.positions.shape[1])
-            near[rows] = hull_distance(positions[rows, :d], scan.positions[:, :d]) <= radius[rows]
+            near[rows] = hull(positions[rows, :d], scan.positions[:, :d]) <= radius[rows]
         watched = by_source & (near | np.asarray(unconfirmed, dtype=bool))
         result: FloatArray = watched.astype(float)
         return result
@@ -510,6 +516,27 @@ def _differs(observed: float, known: float) -> bool:
         return (known <= 0.0) != (observed <= 0.0)
     ratio = observed / known
     return ratio > RATE_WARNING_FACTOR or ratio < 1.0 / RATE_WARNING_FACTOR
+
+
+def range_coverage(
+    positions: FloatArray, sensor: FloatArray, reach: float, spread: FloatArray | None = None
+) -> FloatArray:
+    r"""``(N,)``: the probability that each object (estimate ``positions`` ``(N, d)``) is
+    within ``reach`` (m) of the sensor at ``sensor`` (their first ``min(d, k)`` axes),
+
+    .. math:: \Phi\Big(\frac{r - \lVert x - s \rVert}{\max(\sigma, 10^{-9})}\Big)
+
+    with ``spread`` :math:`\sigma` ``(N,)`` (m); ``None`` makes it a hard cut
+    (:math:`\lVert x - s \rVert \le r`)."""
+    k = min(positions.shape[1], sensor.shape[0])
+    offset = positions[:, :k] - sensor[:k]
+    distance = np.sqrt(np.einsum("nd,nd->n", offset, offset))
+    if spread is None:
+        hard: FloatArray = (distance <= reach).astype(float)
+        return hard
+    sd = np.maximum(spread, 1e-9)
+    inside: FloatArray = ndtr((reach - distance) / sd)
+    return inside
 
 
 def hull_distance(points: FloatArray, corners: FloatArray) -> FloatArray:

@@ -3,6 +3,7 @@ where the extension is not built (simulated in a subprocess that cannot import i
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -64,8 +65,15 @@ def test_without_the_extension_python_runs_and_rust_says_why() -> None:
             print(error)
         """
     )
+    # without SEMWM_ENGINE (a second pass of the suite sets it to rust)
+    env = {k: v for k, v in os.environ.items() if k != "SEMWM_ENGINE"}
     done = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=False
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env=env,
     )
     assert done.returncode == 0, done.stderr
     assert "engine='rust' needs the Rust core semwm._core" in done.stdout

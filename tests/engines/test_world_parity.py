@@ -8,12 +8,16 @@ engine is the specification (docs/engines.md)."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import pytest
 
 from semwm.knowledge.loader import load_knowledge
+from semwm.knowledge.model import Knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.sim.leftbehind import SensorViews
 from semwm.sim.runner import scans
 from semwm.sim.scenarios import make_scenario
 from semwm.world import WorldModel
@@ -24,7 +28,24 @@ from . import needs_rust
 pytestmark = needs_rust
 
 TOL = 1e-9
-SCENARIOS = [("sim1", {}), ("sim2", {}), ("robocup", {"duration": 2.0})]
+BENCHMARK_KNOWLEDGE = Path(__file__).resolve().parents[2] / "benchmarks" / "knowledge"
+
+
+def _knowledge(name: str) -> Knowledge:
+    """A shipped knowledge file, or a benchmark's (datasheet, leftbehind)."""
+    if (BENCHMARK_KNOWLEDGE / name).is_file():
+        return load_knowledge(BENCHMARK_KNOWLEDGE / name)
+    return load_knowledge(shipped_knowledge_path(name))
+
+
+SCENARIOS = [
+    ("sim1", {}),
+    ("sim2", {}),
+    ("robocup", {"duration": 2.0}),
+    # learnt coverage (the convex hull of a scan's detections) at a datasheet's rates;
+    # leftbehind (range coverage, sensor views): test_same_world_leaving_things_behind
+    ("datasheet", {"duration": 20.0}),
+]
 
 
 def _numbers(obj: WorldObject) -> list[float]:
@@ -67,7 +88,7 @@ def _assert_same_frame(python: WorldModel, rust: WorldModel, frame: int) -> int:
 @pytest.mark.parametrize(("name", "sizes"), SCENARIOS, ids=[s[0] for s in SCENARIOS])
 def test_same_world_every_frame(name: str, sizes: dict[str, float], seed: int) -> None:
     scenario = make_scenario(name, seed, **sizes)
-    knowledge = load_knowledge(shipped_knowledge_path(scenario.knowledge_file))
+    knowledge = _knowledge(scenario.knowledge_file)
     python = WorldModel(knowledge, engine="python")
     rust = WorldModel(knowledge, engine="rust")
     frames = objects = 0
@@ -140,3 +161,54 @@ def test_same_kick_trials(seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
                 _largest_difference([got.time_to_see or 0.0], [expected.time_to_see or 0.0]) <= TOL
             )
             assert _largest_difference(got.confidence, expected.confidence) <= TOL
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize(
+    ("poses", "views"),
+    [(False, False), (True, False), (True, True)],
+    ids=["hull", "poses", "views"],
+)
+def test_same_world_leaving_things_behind(seed: int, poses: bool, views: bool) -> None:
+    """``leftbehind`` (the first 60 s: about one lap): without poses (learnt coverage,
+    the convex hull of each scan's detections), with the sensor's pose in its detections
+    (range coverage), or with poses as sensor views (``looked_at``: the view's
+    Gauss-Hermite probability and the missed update, and empty scans)."""
+    scenario = make_scenario("leftbehind", seed, poses=poses)
+    scenario = replace(scenario, detections=[d for d in scenario.detections if d.time < 60.0])
+    knowledge = _knowledge(scenario.knowledge_file)
+    worlds: dict[str, Any] = {}
+    for engine in ("python", "rust"):
+        world = WorldModel(knowledge, reorder_window=0.0, engine=engine)
+        worlds[engine] = SensorViews(world, scenario) if views else world
+    frames = objects = 0
+    for scan in scans(scenario.detections):
+        worlds["python"].ingest(scan)
+        worlds["rust"].ingest(scan)
+        python, rust = (getattr(w, "inner", w) for w in (worlds["python"], worlds["rust"]))
+        objects += _assert_same_frame(python, rust, frames)
+        frames += 1
+    assert frames > 100 and objects > frames
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_same_world_of_a_static_grid(seed: int) -> None:
+    """The benchmark grid (N = 30, with its region): the region's inside probability,
+    and the convex hull of each scan's detections computed in Rust on every scan (every
+    object is detected in every frame, so the hull decides nothing here; the ``hull``
+    case of :func:`test_same_world_leaving_things_behind` is where it does)."""
+    scenario = make_scenario("grid", seed, n_objects=30, duration=3.0)
+    knowledge = _knowledge(scenario.knowledge_file)
+    region = tuple(tuple(r) for r in scenario.region)
+    knowledge = knowledge.model_copy(
+        update={"world": knowledge.world.model_copy(update={"region": region})}
+    )
+    python = WorldModel(knowledge, engine="python")
+    rust = WorldModel(knowledge, engine="rust")
+    frames = objects = 0
+    for scan in scans(scenario.detections):
+        python.ingest(scan)
+        rust.ingest(scan)
+        objects += _assert_same_frame(python, rust, frames)
+        frames += 1
+    assert frames > 20 and objects > 20 * frames
