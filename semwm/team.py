@@ -13,7 +13,12 @@ estimate holds the information sent before. What a report carries
 
 * ``all``: every local object, its covariance as is (the naive baseline: the same
   information is counted again in every report);
-* ``updated``: only objects updated by a local detection since the last report;
+* ``updated``: only objects updated by a local detection since the last report; an
+  object the robot tracks (not its own pose: no label) with its covariance doubled
+  (:data:`TRACKED_FACTOR`, as ``ci`` does for every object): its filtered estimate
+  holds what earlier reports carried, and a laggy estimate of a turning robot sent
+  as is lies outside the global gate and starts a duplicate (issue 28); the robot's
+  own pose, a fresh precise self-localisation, goes as is;
 * ``ci``: ``updated`` with the covariance doubled: the Kalman update with ``2 P``
   is the local half of covariance intersection with weight 1/2, a conservative
   fusion for unknown correlation;
@@ -62,6 +67,11 @@ from semwm.world_types import WorldObject, WorldState
 
 LOCAL_DETECTOR = "local_model"
 """The global model's detector for local-model reports (few false objects left)."""
+
+
+TRACKED_FACTOR = 2.0
+"""``updated``: factor on the covariance of an object the robot tracks (unlabelled):
+covariance intersection with weight 1/2, the ``ci`` factor."""
 
 
 class Strategy(StrEnum):
@@ -275,6 +285,8 @@ class LocalModel:
         covariance = np.asarray(obj.covariance)
         if strategy is Strategy.CI:
             covariance = 2.0 * covariance
+        elif strategy is Strategy.UPDATED and obj.label is None:
+            covariance = TRACKED_FACTOR * covariance
         elif strategy is Strategy.INFORMATION and sent is not None:
             gained = _new_information(position, covariance, sent, at)
             if gained is None:
