@@ -157,13 +157,16 @@ def run_team(
     drift_gate: float | None = 0.95,
     seed: int = 0,
     gospa_c: float | None = None,
+    horizon: float | None = None,
 ) -> TeamRun:
     """Play ``scenario`` through a flat (``levels=1``) or two-level team.
 
     ``drift_gate`` (two levels): between periods a robot also reports when the
     global side's view of one of its objects is outside this probability's gate of
     the local estimate (:meth:`semwm.team.LocalModel.due`); ``None``: only when it
-    has a new object."""
+    has a new object. ``horizon`` (s): how far ahead the gate compares the global
+    view with the local estimate (:meth:`~semwm.team.LocalModel.due`); by default the
+    report period."""
     if levels not in (1, 2):
         raise ValueError(f"levels must be 1 or 2; got {levels}")
     net = network or Network()
@@ -176,6 +179,8 @@ def run_team(
         return float(rng.uniform(low, high)) if high > 0 else 0.0
 
     strategy = Strategy(strategy)
+    if horizon is None:
+        horizon = report_period
     reorder = net.receiver == "reorder"
     receiver = WorldModel(
         global_knowledge(knowledge) if levels == 2 else knowledge,
@@ -208,7 +213,7 @@ def run_team(
         if t >= next_report[source] - 1e-9:
             next_report[source] = t + report_period
             report = local.report()
-        elif local.due(drift_gate=drift_gate):
+        elif local.due(drift_gate=drift_gate, horizon=horizon):
             report = local.report()  # the whole report, between periods
         cpu_local += clock.process_time() - start
         if report is not None:
