@@ -246,17 +246,31 @@ class ClassFilter:
         self, x: FloatArray, P: FloatArray, mu: FloatArray, z: FloatArray, R: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Update with measured positions; see :func:`semwm.filters.batched.update`."""
-        if self.engine == "rust":
-            return rust.update(x, P, mu, z, R)
-        return batched.update(x, P, mu, z, R)
+        return update_with(self.engine, x, P, mu, z, R)
 
     def combine(
         self, x: FloatArray, P: FloatArray, mu: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
         """Combined mean ``(N, n)`` and covariance ``(N, n, n)``."""
-        if self.engine == "rust":
-            return rust.combine(x, P, mu)
-        return batched.combine(x, P, mu)
+        return combine_with(self.engine, x, P, mu)
+
+
+def update_with(
+    engine: Engine, x: FloatArray, P: FloatArray, mu: FloatArray, z: FloatArray, R: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The Kalman / IMM update of any filter shape (:func:`batched.update`) by ``engine``."""
+    if engine == "rust":
+        return rust.update(x, P, mu, z, R)
+    return batched.update(x, P, mu, z, R)
+
+
+def combine_with(
+    engine: Engine, x: FloatArray, P: FloatArray, mu: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The combined estimate of any filter shape (:func:`batched.combine`) by ``engine``."""
+    if engine == "rust":
+        return rust.combine(x, P, mu)
+    return batched.combine(x, P, mu)
 
 
 class FilterFactory:
@@ -285,17 +299,13 @@ class FilterFactory:
         self, x: FloatArray, P: FloatArray, mu: FloatArray, z: FloatArray, R: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """The Kalman / IMM update of any filter shape (:func:`batched.update`)."""
-        if self.engine == "rust":
-            return rust.update(x, P, mu, z, R)
-        return batched.update(x, P, mu, z, R)
+        return update_with(self.engine, x, P, mu, z, R)
 
     def combine(
         self, x: FloatArray, P: FloatArray, mu: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
         """The combined estimate of any filter shape (:func:`batched.combine`)."""
-        if self.engine == "rust":
-            return rust.combine(x, P, mu)
-        return batched.combine(x, P, mu)
+        return combine_with(self.engine, x, P, mu)
 
     def mahalanobis_squared(self, residual: FloatArray, covariance: FloatArray) -> FloatArray:
         """The gate's :math:`r^T C^{-1} r` of ``(K, d)`` residuals and ``(K, d, d)``
