@@ -420,4 +420,21 @@ def _detector_problems(
                 )
             )
         problems += matrix_problems(matrix, dim, "measurement noise", where)
+    if detector.position is not None and len(detector.position) != dim:
+        problems.append(
+            Problem(
+                f"detector {detector.name!r}: position must have {dim} coordinates (the world's "
+                f"dimension); found {len(detector.position)}",
+                (*path, "position"),
+            )
+        )
+    if detector.position is not None and not detector.static:
+        problems.append(
+            Problem(
+                f"detector {detector.name!r}: position is where a static sensor stands; set "
+                "static: true, or leave position out (a moving sensor gives sensor_position "
+                "with its detections)",
+                (*path, "position"),
+            )
+        )
     return problems

@@ -461,3 +461,29 @@ def test_problem_text_is_file_colon_line() -> None:
         f"test.yaml:{line_of(text, 'Ghost')}: appearance relation of 'Mover' targets unknown "
         "class 'Ghost'; known classes: Mover, Thing (at classes.1.appearance.0.target)"
     )
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ("static: true\n    position: [1.0, 2.0, 3.0]", "position must have 2 coordinates"),
+        ("position: [1.0, 2.0]", "set static: true"),
+    ],
+)
+def test_a_static_detectors_position_is_checked(fields: str, message: str) -> None:
+    """Issue 28's static detector: its position has the world's dimension and belongs to
+    a static sensor, reported at its line."""
+    from semwm.knowledge.loader import analyse_text
+
+    text = (
+        "world: {dimension: 2, region: [[0, 4], [0, 3]]}\n"
+        "classes:\n  - name: Cup\n    detection_frequency: 2.0\n    new_frequency: 0.1\n"
+        "    filter: {type: kalman, model: {motion_model: zeroth_order, "
+        "system_noise: [[1.0e-6, 0], [0, 1.0e-6]]}}\n"
+        "    measurement_noise: [[0.01, 0], [0, 0.01]]\n"
+        "detectors:\n  - name: camera\n    clutter_frequency: 0.5\n    " + fields + "\n"
+    )
+    analysis = analyse_text(text, "yaml", "mine.yaml")
+    assert analysis.knowledge is None
+    problems = [str(p) for p in analysis.problems]
+    assert any(message in p and p.startswith("mine.yaml:1") for p in problems), problems
