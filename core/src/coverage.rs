@@ -14,8 +14,19 @@
 
 use crate::existence::ndtr;
 
+/// A spread above this fraction of the reach makes `range_coverage` integrate over the
+/// sensor's disc (ball): there its edge is not straight at the estimate's scale
+/// (`semwm.mhf.rates.WIDE_SPREAD`).
+pub const WIDE_SPREAD: f64 = 0.25;
+
+/// The largest `(d / s)^2 / 2` for which `ball_probability` sums its series
+/// (`semwm.mhf.rates.SERIES_CENTRE`).
+pub const SERIES_CENTRE: f64 = 200.0;
+
 /// Range coverage of one object at `x` from a sensor at `sensor` (the first
-/// `min(len)` entries of each): `Phi((reach - d) / max(spread, 1e-9))`, or `d <= reach`
+/// `k = min(len)` entries of each), the object isotropic Gaussian with std `spread`
+/// around `x`: `Phi((reach - d) / max(spread, 1e-9))` where the spread is tight against
+/// the reach or the estimate far from the sensor, else `ball_probability`; `d <= reach`
 /// (1 or 0) without a spread.
 pub fn range_coverage(x: &[f64], sensor: &[f64], reach: f64, spread: Option<f64>) -> f64 {
     let k = x.len().min(sensor.len());
@@ -31,8 +42,70 @@ pub fn range_coverage(x: &[f64], sensor: &[f64], reach: f64, spread: Option<f64>
                 0.0
             }
         }
-        Some(s) => ndtr((reach - distance) / s.max(1e-9)),
+        Some(s) => {
+            let sd = s.max(1e-9);
+            let scaled = distance / sd;
+            if sd > WIDE_SPREAD * reach && 0.5 * scaled.powi(2) <= SERIES_CENTRE {
+                ball_probability(scaled, reach / sd, k)
+            } else {
+                ndtr((reach - distance) / sd)
+            }
+        }
     }
+}
+
+/// `P(|X| <= radius)` for `X ~ N(mu, I_dim)`, `|mu| = centre`: the noncentral chi CDF
+/// (`semwm.mhf.rates.ball_probability`, which gives the three forms): closed forms in
+/// 1-D and 3-D, the Poisson mixture of central chi-square CDFs in 2-D.
+pub fn ball_probability(centre: f64, radius: f64, dim: usize) -> f64 {
+    let (a, b) = (centre, radius);
+    if dim == 1 || dim > 3 {
+        return ndtr(b - a) - ndtr(-b - a);
+    }
+    if dim == 3 {
+        if a < 1e-8 {
+            return 2.0 * ndtr(b) - 1.0 - 2.0 * b * normal_pdf(b);
+        }
+        return ndtr(b - a) - ndtr(-b - a) - (normal_pdf(b - a) - normal_pdf(b + a)) / a;
+    }
+    let (m, y) = (0.5 * a * a, 0.5 * b * b);
+    let log_m = if m > 0.0 { m.ln() } else { f64::NEG_INFINITY };
+    let log_y = if y > 0.0 { y.ln() } else { f64::NEG_INFINITY };
+    let mut log_factorial = 0.0;
+    let mut below = 0.0;
+    let mut total = 0.0;
+    let mut j: u32 = 0;
+    loop {
+        let jf = f64::from(j);
+        if j > 0 {
+            log_factorial += jf.ln();
+        }
+        below += if y > 0.0 {
+            (-y + jf * log_y - log_factorial).exp()
+        } else if j == 0 {
+            1.0
+        } else {
+            0.0
+        };
+        let weight = if m > 0.0 {
+            (-m + jf * log_m - log_factorial).exp()
+        } else if j == 0 {
+            1.0
+        } else {
+            0.0
+        };
+        total += weight * (1.0 - below).max(0.0);
+        j += 1;
+        let jf = f64::from(j);
+        if m == 0.0 || (jf > m && weight * jf / (jf - m) < 1e-17) {
+            break;
+        }
+    }
+    total.clamp(0.0, 1.0)
+}
+
+fn normal_pdf(x: f64) -> f64 {
+    (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt()
 }
 
 /// One facet of a 2-D hull: outward unit normal `n` and offset `c`, `n . x + c` the
@@ -169,5 +242,16 @@ mod tests {
             range_coverage(&[3.0, 4.0, 7.0], &[0.0, 0.0], 5.0, Some(1.0)),
             0.5
         );
+    }
+
+    #[test]
+    fn a_wide_spread_is_covered_by_the_discs_share_of_it() {
+        // scipy.stats.ncx2.cdf(b**2, 2, a**2) and chi2.cdf(1, 3)
+        assert!((ball_probability(3.0, 1.0, 2) - 0.010_829_449_821_547_85).abs() < 1e-13);
+        assert!((ball_probability(0.0, 1.0, 3) - 0.198_748_043_098_799_15).abs() < 1e-13);
+        assert!((ball_probability(20.0, 20.0, 2) - 0.490_023_321_859_030_5).abs() < 1e-13);
+        // a ball 400 m spread, 2 m from a sensor of 5 m reach: about r^2 / 2 s^2
+        let covered = range_coverage(&[2.0, 0.0], &[0.0, 0.0], 5.0, Some(400.0));
+        assert!((covered - 25.0 / (2.0 * 400.0 * 400.0)).abs() < 1e-6);
     }
 }

@@ -52,6 +52,7 @@ sources' clocks, which say when they look, are kept).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -518,16 +519,34 @@ def _differs(observed: float, known: float) -> bool:
     return ratio > RATE_WARNING_FACTOR or ratio < 1.0 / RATE_WARNING_FACTOR
 
 
+WIDE_SPREAD = 0.25
+"""A spread above this fraction of the reach makes :func:`range_coverage` integrate over
+the sensor's disc (ball): there its edge is not straight at the estimate's scale."""
+
+SERIES_CENTRE = 200.0
+"""The largest ``(d / s)^2 / 2`` (the Poisson mixture's centre) for which
+:func:`ball_probability` sums its series; beyond it the estimate lies more than 20
+spreads from the sensor, the disc's edge is straight at its scale and the 1-D form
+holds."""
+
+
 def range_coverage(
     positions: FloatArray, sensor: FloatArray, reach: float, spread: FloatArray | None = None
 ) -> FloatArray:
     r"""``(N,)``: the probability that each object (estimate ``positions`` ``(N, d)``) is
-    within ``reach`` (m) of the sensor at ``sensor`` (their first ``min(d, k)`` axes),
+    within ``reach`` (m) of the sensor at ``sensor`` (their first ``k = min(d, k)`` axes).
+
+    With ``spread`` :math:`\sigma` ``(N,)`` (m) the object is taken as isotropic
+    Gaussian around its estimate. Where the estimate is tight against the reach
+    (:math:`\sigma \le` :data:`WIDE_SPREAD` :math:`r`) or far from the sensor, the
+    disc's edge is straight at its scale:
 
     .. math:: \Phi\Big(\frac{r - \lVert x - s \rVert}{\max(\sigma, 10^{-9})}\Big)
 
-    with ``spread`` :math:`\sigma` ``(N,)`` (m); ``None`` makes it a hard cut
-    (:math:`\lVert x - s \rVert \le r`)."""
+    otherwise the probability of the disc (ball) itself, :func:`ball_probability`: an
+    estimate spread far wider than the reach (a ball nobody has seen for a minute) is
+    within it with probability about :math:`r^2 / 2\sigma^2`, not one half.
+    ``None`` makes it a hard cut (:math:`\lVert x - s \rVert \le r`)."""
     k = min(positions.shape[1], sensor.shape[0])
     offset = positions[:, :k] - sensor[:k]
     distance = np.sqrt(np.einsum("nd,nd->n", offset, offset))
@@ -536,7 +555,53 @@ def range_coverage(
         return hard
     sd = np.maximum(spread, 1e-9)
     inside: FloatArray = ndtr((reach - distance) / sd)
+    wide = (sd > WIDE_SPREAD * reach) & (0.5 * (distance / sd) ** 2 <= SERIES_CENTRE)
+    for i in np.flatnonzero(wide).tolist():
+        inside[i] = ball_probability(float(distance[i] / sd[i]), float(reach / sd[i]), k)
     return inside
+
+
+def ball_probability(centre: float, radius: float, dim: int) -> float:
+    r"""``P(|X| <= radius)`` for ``X ~ N(mu, I_dim)`` with ``|mu| = centre`` (the CDF of
+    the noncentral chi distribution), for ``dim`` 1, 2 or 3.
+
+    * 1: :math:`\Phi(b - a) - \Phi(-b - a)`;
+    * 3: :math:`\Phi(b - a) - \Phi(-b - a) - (\varphi(b - a) - \varphi(b + a)) / a`
+      (its limit :math:`2\Phi(b) - 1 - 2 b \varphi(b)` at :math:`a = 0`);
+    * 2: the noncentral :math:`\chi^2_2` CDF at :math:`b^2` as its Poisson mixture of
+      central ones, :math:`\sum_j \mathrm{Pois}(j; a^2/2)\, P(j + 1, b^2/2)`
+      (:math:`P` the regularised lower incomplete gamma function,
+      :math:`1 - e^{-y}\sum_{i \le j} y^i / i!`), summed until the Poisson weight
+      left is below 1e-16.
+    """
+    a, b = centre, radius
+    if dim == 1 or dim > 3:
+        return float(ndtr(b - a) - ndtr(-b - a))
+    if dim == 3:
+        if a < 1e-8:
+            return float(2.0 * ndtr(b) - 1.0 - 2.0 * b * _normal_pdf(b))
+        return float(ndtr(b - a) - ndtr(-b - a) - (_normal_pdf(b - a) - _normal_pdf(b + a)) / a)
+    m, y = 0.5 * a * a, 0.5 * b * b
+    log_m = math.log(m) if m > 0.0 else -math.inf
+    log_y = math.log(y) if y > 0.0 else -math.inf
+    log_factorial = 0.0
+    below = 0.0  # sum_{i <= j} e^-y y^i / i!
+    total = 0.0
+    j = 0
+    while True:
+        if j > 0:
+            log_factorial += math.log(j)
+        below += math.exp(-y + j * log_y - log_factorial) if y > 0.0 else float(j == 0)
+        weight = math.exp(-m + j * log_m - log_factorial) if m > 0.0 else float(j == 0)
+        total += weight * max(0.0, 1.0 - below)
+        j += 1
+        if m == 0.0 or (j > m and weight * j / (j - m) < 1e-17):
+            break
+    return min(max(total, 0.0), 1.0)
+
+
+def _normal_pdf(x: float) -> float:
+    return math.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi)
 
 
 def hull_distance(points: FloatArray, corners: FloatArray) -> FloatArray:

@@ -140,7 +140,8 @@ def test_range_coverage(seed: int, n: int, d: int, k: int, soft: bool) -> None:
     rng = np.random.default_rng(seed)
     positions = rng.uniform(-10.0, 10.0, size=(n, d))
     sensor = rng.uniform(-3.0, 3.0, k)
-    spread = rng.uniform(0.0, 2.0, n) if soft else None
+    # up to 30 m: wide against the reach, where the disc's share is summed
+    spread = rng.uniform(0.0, 2.0, n) * 10.0 ** rng.integers(0, 2, n) * 1.5 if soft else None
     if spread is not None and n:
         spread[0] = 0.0  # the 1e-9 floor
     reach = float(rng.uniform(1.0, 10.0))
