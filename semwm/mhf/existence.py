@@ -93,8 +93,8 @@ def inside_probability(
     inside and only what is clearly outside is out:
 
     .. math::
-       P(	ext{inside}) = \prod_i \Phi\Big(rac{b_i + m_i - x_i}{\sigma_i}\Big)
-                        - \Phi\Big(rac{a_i - m_i - x_i}{\sigma_i}\Big)
+       P(\text{inside}) = \prod_i \Phi\Big(\frac{b_i + m_i - x_i}{\sigma_i}\Big)
+                        - \Phi\Big(\frac{a_i - m_i - x_i}{\sigma_i}\Big)
     """
     count = position.shape[0]
     if region is None or count == 0:

@@ -138,8 +138,8 @@ class MultipleHypothesisFilter:
         self.observed_rates = self.mht and world.observed_detection_rates
         self.merge_distance = world.merge_distance if self.mht else 0.0
         self.region = world.region
-        self._margins: dict[str, FloatArray] = {}
-        self._last_margins: tuple[tuple[Track, ...], FloatArray] | None = None
+        self._terms: dict[str, tuple[FloatArray, FloatArray]] = {}
+        self._last_terms: tuple[tuple[Track, ...], FloatArray, FloatArray] | None = None
         # per class: (P_max, longest time unseen), infinite when the class sets none
         self._limits = {
             name: (
@@ -213,46 +213,64 @@ class MultipleHypothesisFilter:
 
     def inside(self, predicted: Predicted) -> FloatArray:
         """Each predicted object's probability of being inside the region, widened by its
-        class's measurement noise (:func:`semwm.mhf.existence.inside_probability`)."""
-        return predicted.inside_region(
-            self.region, self.region_margins(predicted.tracks), self.kernels.inside_probability
-        )
+        class's measurement noise (:func:`semwm.mhf.existence.inside_probability`).
+
+        For a class without P_max (``max_position_variance``) the spread that counts is
+        the estimate's, at most the class's measurement noise per axis: the knowledge
+        keeps such objects however uncertain, and an estimate that grows while nobody
+        sees the object (a ball out of view) says where it may be, not that it left; it
+        leaves when its mean crosses the edge. A class with P_max counts its whole
+        spread: P_max removes the estimates grown too uncertain."""
+        margins, noise = self._region_terms(predicted.tracks)
+        return predicted.inside_region(self.region, margins, self.kernels.inside_probability, noise)
 
     def region_margins(self, tracks: Sequence[Track]) -> FloatArray:
         """``(N, d)``: each object's region margin (:func:`region_margins`), from its
         class's measurement noise for the default detector; zero for a class whose
         filter has a velocity (it leaves by crossing the edge) and for a class since
         removed."""
+        return self._region_terms(tracks)[0]
+
+    def _region_terms(self, tracks: Sequence[Track]) -> tuple[FloatArray, FloatArray]:
+        """``(N, d)`` each: the objects' region margins (:meth:`region_margins`) and the
+        caps of their position variances for the region (:meth:`inside`): their
+        classes' measurement noise variances per axis (the default detector's), or
+        infinite (no cap) for a class with P_max or since removed."""
         dim = self.factory.dim
         if not tracks:
-            return np.zeros((0, dim))
-        last = self._last_margins  # a scan asks for one prediction's margins up to 3 times
+            return np.zeros((0, dim)), np.zeros((0, dim))
+        last = self._last_terms  # a scan asks for one prediction's terms up to 3 times
         if last is not None and last[0] is tracks:
-            return last[1]
-        margins = self._margins
-        rows = []
+            return last[1], last[2]
+        terms = self._terms
+        margin_rows = []
+        noise_rows = []
         for t in tracks:
-            row = margins.get(t.cls)
-            if row is None:
-                # a class that moves (its filter has a velocity) crosses the region's
-                # edge by entering and leaving; a static one sits on it (a table top
-                # on the region's floor, a shelf on its wall): only its edge is soft
-                moves = (
-                    t.cls in self.knowledge.classes
-                    and self.factory.filter_for(t.cls).state_size > dim
-                )
-                if t.cls in self.knowledge.classes and not moves:
-                    R = self.factory.measurement_noise(t.cls, self.knowledge.default_detector)
-                    p = self.knowledge.world.gate_probability
-                    row = region_margins(R[None, :dim, :dim], p)[0]
-                else:
-                    row = np.zeros(dim)
-                margins[t.cls] = row
-            rows.append(row)
-        result = np.array(rows)
-        if isinstance(tracks, tuple):  # immutable: the same tuple has the same margins
-            self._last_margins = (tracks, result)
-        return result
+            known = terms.get(t.cls)
+            if known is None:
+                known = terms[t.cls] = self._class_region_terms(t.cls)
+            margin_rows.append(known[0])
+            noise_rows.append(known[1])
+        margins, noise = np.array(margin_rows), np.array(noise_rows)
+        if isinstance(tracks, tuple):  # immutable: the same tuple has the same terms
+            self._last_terms = (tracks, margins, noise)
+        return margins, noise
+
+    def _class_region_terms(self, cls: str) -> tuple[FloatArray, FloatArray]:
+        dim = self.factory.dim
+        if cls not in self.knowledge.classes:
+            return np.zeros(dim), np.full(dim, np.inf)
+        R = self.factory.measurement_noise(cls, self.knowledge.default_detector)[:dim, :dim]
+        noise = np.diagonal(R).astype(float)
+        if self.knowledge.classes[cls].max_position_variance is not None:
+            noise = np.full(dim, np.inf)  # its P_max removes what grew too uncertain
+        # a class that moves (its filter has a velocity) crosses the region's edge by
+        # entering and leaving; a static one sits on it (a table top on the region's
+        # floor, a shelf on its wall): only its edge is soft
+        if self.factory.filter_for(cls).state_size > dim:
+            return np.zeros(dim), noise
+        p = self.knowledge.world.gate_probability
+        return region_margins(R[None], p)[0], noise
 
     def class_rates(self, tracks: Sequence[Track]) -> np.ndarray:
         """Each object's class ``detection_frequency`` (Hz)."""

@@ -115,16 +115,20 @@ class Predicted:
         region: Region | None,
         margin: FloatArray | None = None,
         kernel: InsideKernel = inside_probability,
+        variance_cap: FloatArray | None = None,
     ) -> FloatArray:
         """Each object's probability of being inside ``region`` widened by ``margin``
         ``(N, d)`` (:func:`semwm.mhf.existence.inside_probability`, or the engine's
-        ``kernel``), computed once per region (one caller passes one object's margins:
-        its class's)."""
+        ``kernel``), its position variances capped per axis at ``variance_cap``
+        ``(N, d)``; computed once per region (one caller passes one object's margins
+        and caps: its class's)."""
         known = self._inside.get(region)
         if known is None:
-            known = self._inside[region] = kernel(
-                self.position, self.position_covariance, region, margin
-            )
+            covariance = self.position_covariance
+            if variance_cap is not None and len(self.tracks):
+                variances = np.minimum(covariance.diagonal(axis1=1, axis2=2), variance_cap)
+                covariance = variances[:, :, None] * np.eye(variances.shape[1])
+            known = self._inside[region] = kernel(self.position, covariance, region, margin)
         return known
 
     def velocity(self, dim: int) -> FloatArray:

@@ -126,7 +126,9 @@ def test_robocup_is_paper_000() -> None:
     assert isinstance(ball, KalmanFilterSpec) and ball.model.motion_model == "first_order"
     assert knowledge.detectors["omnivision"].range == 5.0
     assert knowledge.detectors["self_localization"].clutter_frequency < 0.01
-    # C3 is 1 s for the robots; the ball ages by confidence first (issue 28)
+    # C3 is 1 s for the robots; the ball ages by confidence and stays listed, invalid,
+    # until the scans that cover it deny it (issue 28): no P_max, C3 two minutes
     c3 = {name: c.max_time_without_update for name, c in knowledge.classes.items()}
-    assert c3 == {"Robot": 1.0, "Peer": 1.0, "Opponent": 1.0, "Ball": 3.0}
+    assert c3 == {"Robot": 1.0, "Peer": 1.0, "Opponent": 1.0, "Ball": 120.0}
+    assert knowledge.classes["Ball"].max_position_variance is None
     assert load_document(shipped_knowledge_path("robocup.xml")) == knowledge.document

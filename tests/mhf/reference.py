@@ -186,7 +186,12 @@ class ReferenceMHF:
             return 1.0
         p = 1.0
         for axis, (lo, hi) in enumerate(region):
-            sd = math.sqrt(o.P[axis, axis])
+            # without P_max the spread counts up to the class's noise: growth while
+            # unseen is no exit
+            variance = o.P[axis, axis]
+            if self.k.classes[o.cls].max_position_variance is None:
+                variance = min(variance, self.R(o.cls)[axis, axis])
+            sd = math.sqrt(variance)
             m = self.margin(o, axis)
             cdf = lambda v: 0.5 * (1.0 + math.erf(v / math.sqrt(2.0)))  # noqa: E731
             p *= cdf((hi + m - o.x[axis]) / sd) - cdf((lo - m - o.x[axis]) / sd)

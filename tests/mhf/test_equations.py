@@ -143,7 +143,8 @@ def test_second_detection_mht() -> None:
     wm.ingest(det(dt, "Cup", *z2, covariance=R_FULL.tolist()))
     P_pred = P0 * np.eye(2) + dt * QC * np.eye(2)
     x_post, _, y, S = _kalman(z1, P_pred, z2, R_FULL)
-    sd = math.sqrt(P_pred[0, 0])
+    # the spread counts up to the class's noise (growth while unseen is no exit)
+    sd = math.sqrt(min(P_pred[0, 0], R))
     # the region widened by the class's noise at the gate's 1-D quantile (soft region)
     gate = wm.knowledge.world.gate_probability  # 1 here: no margin
     m = math.sqrt(chdtri(1, 1.0 - gate) * R) if gate < 1.0 else 0.0
