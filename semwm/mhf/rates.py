@@ -269,6 +269,7 @@ class ObservedRates:
         spread: FloatArray | None = None,
         ranged: RangeCoverage | None = None,
         hull: HullDistance | None = None,
+        range_edges: FloatArray | None = None,
     ) -> FloatArray:
         r"""``(N,)``: the probability that the scan could have seen each object, so that
         not reporting it is evidence that it is gone (docs/knowledge.md, "What semwm
@@ -276,10 +277,11 @@ class ObservedRates:
 
         * The scan gave its sensor's position and every detector of it has a
           ``range``: the probability that the object is within that range of the
-          sensor, :math:`\Phi((r - d) / s)` with ``d`` its estimate's distance and
-          ``s`` its ``spread`` (m: the estimate's and the measurement's standard
-          deviation; 0 makes it a hard cut). An object on the range's edge may be
-          just outside it, and is then never detected there.
+          sensor (:func:`range_coverage`, with ``d`` its estimate's distance and ``s``
+          its ``spread``, m), the range shortened by the object's ``range_edges``
+          ``(N,)`` (m, its noise at the gate's quantile): an object within its noise
+          of the range's edge may be just outside it, and is then never detected
+          there, however often the sensor passes it by.
         * Every detector of the scan is declared ``static`` in the knowledge (fixed
           coverage): every object (the region's inside probability weighs it in
           :meth:`~semwm.mhf.filter.MultipleHypothesisFilter.miss_rates`).
@@ -304,7 +306,18 @@ class ObservedRates:
         if count == 0:
             return np.zeros(0)
         if scan.sensor is not None and scan.reach is not None:
-            return ranged(positions, scan.sensor, scan.reach, spread)
+            if range_edges is None or not range_edges.any():
+                return ranged(positions, scan.sensor, scan.reach, spread)
+            covered = np.zeros(count)
+            for edge in np.unique(range_edges).tolist():  # one call per class, in effect
+                rows = np.flatnonzero(range_edges == edge)
+                covered[rows] = ranged(
+                    positions[rows],
+                    scan.sensor,
+                    max(scan.reach - edge, 0.0),
+                    None if spread is None else spread[rows],
+                )
+            return covered
         if scan.fixed:
             return np.ones(count)
         source = scan.source
