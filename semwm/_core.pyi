@@ -64,9 +64,9 @@ class ScanExpansion:
     def scan(
         self,
         counters: tuple[int, int, int],
-        tracks: tuple[list[int], list[float], list[int]],
+        tracks: tuple[list[int], list[float], list[str | None]],
         clusters: tuple[list[int], list[int], list[int], list[int], list[float], list[float]],
-        options: tuple[list[int], list[int], list[int], list[float]],
+        options: tuple[list[int], list[str | None], list[int], list[float]],
         presence: tuple[list[int], list[int], list[float]],
         existing: tuple[list[int], list[int], list[float]],
     ) -> tuple[

@@ -26,11 +26,12 @@
 //! caller to make. Where the specification iterates over a set of objects, this code
 //! iterates in ascending key order, as the specification does (`sorted`).
 
-use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
+use std::collections::{BTreeMap, BTreeSet};
 
 use crate::error::{KernelError, KernelResult};
 use crate::hypotheses::{
-    checked_ln, holds, log_add, prune, replaced, with_key, Cluster, Hypothesis, Merged,
+    checked_ln, holds, log_add, prune, replaced, with_key, Cluster, Hypothesis, KeyMap, KeySet,
+    Merged,
 };
 
 /// The filter's settings the algebra reads.
@@ -128,7 +129,7 @@ pub enum Op {
 #[derive(Debug, Clone)]
 pub struct Scan {
     pub settings: Settings,
-    pub tracks: HashMap<u64, TrackInfo>,
+    pub tracks: KeyMap<u64, TrackInfo>,
     /// Keys below it existed before the scan (`state.next_key`).
     pub first_new: u64,
     /// The next key to give (the table's, after the options took theirs).
@@ -157,23 +158,23 @@ fn unknown(key: u64) -> KernelError {
 
 /// The scan's working track table (`_TrackTable`), as far as the algebra reads it.
 struct Table {
-    info: HashMap<u64, TrackInfo>,
+    info: KeyMap<u64, TrackInfo>,
     next_key: u64,
     first_new: u64,
-    by_label: HashMap<u32, BTreeSet<u64>>,
-    fresh: HashSet<u64>,
-    origin: HashMap<u64, u64>,
-    derived: HashMap<u64, Vec<u64>>,
-    copies: HashMap<u64, u64>,
-    unlabeled: HashMap<u64, u64>,
-    births: HashMap<(u64, u64), u64>,
-    born: HashSet<u64>,
+    by_label: KeyMap<u32, BTreeSet<u64>>,
+    fresh: KeySet<u64>,
+    origin: KeyMap<u64, u64>,
+    derived: KeyMap<u64, Vec<u64>>,
+    copies: KeyMap<u64, u64>,
+    unlabeled: KeyMap<u64, u64>,
+    births: KeyMap<(u64, u64), u64>,
+    born: KeySet<u64>,
     ops: Vec<Op>,
 }
 
 impl Table {
-    fn new(info: HashMap<u64, TrackInfo>, first_new: u64, next_key: u64) -> Table {
-        let mut by_label: HashMap<u32, BTreeSet<u64>> = HashMap::new();
+    fn new(info: KeyMap<u64, TrackInfo>, first_new: u64, next_key: u64) -> Table {
+        let mut by_label: KeyMap<u32, BTreeSet<u64>> = KeyMap::default();
         for (&key, track) in &info {
             if let (Some(label), true) = (track.label, key < first_new) {
                 by_label.entry(label).or_default().insert(key);
@@ -184,13 +185,13 @@ impl Table {
             next_key,
             first_new,
             by_label,
-            fresh: HashSet::new(),
-            origin: HashMap::new(),
-            derived: HashMap::new(),
-            copies: HashMap::new(),
-            unlabeled: HashMap::new(),
-            births: HashMap::new(),
-            born: HashSet::new(),
+            fresh: KeySet::default(),
+            origin: KeyMap::default(),
+            derived: KeyMap::default(),
+            copies: KeyMap::default(),
+            unlabeled: KeyMap::default(),
+            births: KeyMap::default(),
+            born: KeySet::default(),
             ops: Vec::new(),
         }
     }
@@ -273,13 +274,13 @@ impl Table {
 /// The scan's working set of clusters (`_ClusterBook`), in the order of their ids.
 struct Book {
     clusters: BTreeMap<usize, Cluster>,
-    owner: HashMap<u64, usize>,
+    owner: KeyMap<u64, usize>,
     next: usize,
 }
 
 impl Book {
     fn new(clusters: Vec<(usize, Cluster)>, next: usize) -> Book {
-        let mut owner = HashMap::new();
+        let mut owner = KeyMap::default();
         for (id, cluster) in &clusters {
             for &key in &cluster.keys {
                 owner.insert(key, *id);
@@ -571,7 +572,7 @@ fn expand(
     let log_clutter = option.log_clutter;
     let log_or_clutter = log_add(log_clutter, option.new_log); // the usual "new or clutter"
     let floor = update_floor(&hypotheses, option, !copies.is_empty(), settings);
-    let mut born_at: HashMap<u64, u64> = HashMap::new(); // birth weight -> version (mht)
+    let mut born_at: KeyMap<u64, u64> = KeyMap::default(); // birth weight -> version (mht)
     let mut children = Merged::new();
     for h in &hypotheses {
         let keys = &h.keys;
@@ -748,11 +749,10 @@ pub fn expand_scan(scan: Scan) -> KernelResult<Expanded> {
 pub struct ScanArrays {
     /// `(first_new, next_key, cluster_count)`.
     pub counters: (u64, u64, usize),
-    /// Every version the given clusters hold and the options name: key, rate, label
-    /// id (`-1`: none).
+    /// Every version the given clusters hold and the options name: key, rate, label.
     pub track_keys: Vec<u64>,
     pub track_rates: Vec<f64>,
-    pub track_labels: Vec<i64>,
+    pub track_labels: Vec<Option<String>>,
     /// Per given cluster its index and number of hypotheses; per hypothesis its number
     /// of keys, log weight and rate; the keys one hypothesis after the other.
     pub cluster_ids: Vec<usize>,
@@ -761,12 +761,12 @@ pub struct ScanArrays {
     pub hypothesis_keys: Vec<u64>,
     pub log_weights: Vec<f64>,
     pub rates: Vec<f64>,
-    /// Per option: `1` settled, `0` detection options; label id (`-1`: none); two keys
+    /// Per option: `1` settled, `0` detection options; its detection's label; two keys
     /// (settled: old, updated; options: the new object's, unused); five values
     /// (options: clutter rate, log clutter, the new object's rate, base f_new, its log
     /// numerator; settled: unused).
     pub option_kinds: Vec<u8>,
-    pub option_labels: Vec<i64>,
+    pub option_labels: Vec<Option<String>>,
     pub option_keys: Vec<u64>,
     pub option_values: Vec<f64>,
     /// Per option its number of presence entries, then per entry: key; rate, log
@@ -791,16 +791,16 @@ fn length(name: &str, got: usize, expected: usize) -> KernelResult<()> {
     }
 }
 
-fn label_id(name: &str, value: i64) -> KernelResult<Option<u32>> {
-    if value == -1 {
-        return Ok(None);
+/// Each distinct label as a small id (labels are only compared).
+#[derive(Default)]
+struct Labels(KeyMap<String, u32>);
+
+impl Labels {
+    fn id(&mut self, label: Option<String>) -> Option<u32> {
+        let label = label?;
+        let next = u32::try_from(self.0.len()).unwrap_or(u32::MAX);
+        Some(*self.0.entry(label).or_insert(next))
     }
-    u32::try_from(value).map(Some).map_err(|_| {
-        KernelError::Shape(format!(
-            "{name}: expected -1 (no label) or a label id from 0 to {}, got {value}",
-            u32::MAX
-        ))
-    })
 }
 
 /// Splits `items` into consecutive runs of `counts[i]` items.
@@ -823,16 +823,16 @@ impl ScanArrays {
         let n_tracks = self.track_keys.len();
         length("track_rates", self.track_rates.len(), n_tracks)?;
         length("track_labels", self.track_labels.len(), n_tracks)?;
-        let mut tracks = HashMap::with_capacity(n_tracks);
-        for i in 0..n_tracks {
-            let label = label_id("track_labels", self.track_labels[i])?;
-            tracks.insert(
-                self.track_keys[i],
-                TrackInfo {
-                    rate: self.track_rates[i],
-                    label,
-                },
-            );
+        let mut labels = Labels::default();
+        let mut tracks = KeyMap::with_capacity_and_hasher(n_tracks, Default::default());
+        for ((key, rate), label) in self
+            .track_keys
+            .into_iter()
+            .zip(self.track_rates)
+            .zip(self.track_labels)
+        {
+            let label = labels.id(label);
+            tracks.insert(key, TrackInfo { rate, label });
         }
         length(
             "cluster_sizes",
@@ -880,7 +880,9 @@ impl ScanArrays {
         let existing_keys = runs("existing_keys", &self.existing_keys, &doubled)?;
         let existing_values = runs("existing_values", &self.existing_values, &doubled)?;
         let mut options = Vec::with_capacity(n_options);
+        let mut option_labels = self.option_labels.into_iter();
         for j in 0..n_options {
+            let label = labels.id(option_labels.next().flatten());
             let keys = &self.option_keys[2 * j..2 * j + 2];
             if self.option_kinds[j] == 1 {
                 options.push(ScanOption::Settled {
@@ -911,7 +913,7 @@ impl ScanArrays {
                 .collect();
             existing.sort_by_key(|e| e.old_key);
             options.push(ScanOption::Detection(DetectionOptions {
-                label: label_id("option_labels", self.option_labels[j])?,
+                label,
                 clutter_rate: values[0],
                 log_clutter: values[1],
                 new_key: keys[0],
@@ -1048,7 +1050,7 @@ mod tests {
 
     #[test]
     fn a_certain_update_replaces_the_object() {
-        let tracks = HashMap::from([(1, info(1.0)), (5, info(1.5)), (6, info(2.0))]);
+        let tracks = KeyMap::from_iter([(1, info(1.0)), (5, info(1.5)), (6, info(2.0))]);
         let scan = Scan {
             settings: settings(true),
             tracks,
@@ -1078,7 +1080,7 @@ mod tests {
 
     #[test]
     fn an_uncertain_detection_starts_an_object_with_its_existence() {
-        let tracks = HashMap::from([(1, info(1.0)), (5, info(1.5)), (6, info(2.0))]);
+        let tracks = KeyMap::from_iter([(1, info(1.0)), (5, info(1.5)), (6, info(2.0))]);
         let scan = Scan {
             settings: settings(true),
             tracks,
@@ -1124,7 +1126,8 @@ mod tests {
             rate: 1.0,
             label: Some(0),
         };
-        let tracks = HashMap::from([(1, labelled), (2, info(1.0)), (5, labelled), (6, labelled)]);
+        let tracks =
+            KeyMap::from_iter([(1, labelled), (2, info(1.0)), (5, labelled), (6, labelled)]);
         let mut option = detection(
             6,
             vec![Existing {
@@ -1159,7 +1162,7 @@ mod tests {
 
     #[test]
     fn paper_keeps_one_global_cluster_and_pays_f_per_parent() {
-        let tracks = HashMap::from([(1, info(1.0)), (6, info(2.0))]);
+        let tracks = KeyMap::from_iter([(1, info(1.0)), (6, info(2.0))]);
         let mut option = detection(6, Vec::new());
         option.log_clutter = 1.0_f64.ln();
         option.new_log = 0.5_f64.ln();
@@ -1184,7 +1187,7 @@ mod tests {
     fn a_version_not_given_is_an_error_not_a_panic() {
         let scan = Scan {
             settings: settings(true),
-            tracks: HashMap::new(),
+            tracks: KeyMap::default(),
             first_new: 5,
             next_key: 7,
             clusters: vec![(0, Cluster::certain(1, 1.0))],

@@ -17,9 +17,59 @@
 //! the normaliser summed exactly as `math.fsum` sums, so that both engines give the
 //! same hypotheses in the same order.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+use std::hash::{BuildHasherDefault, Hasher};
 
 use crate::error::{KernelError, KernelResult};
+
+/// A small, fast hasher for keys of object versions (the multiply-rotate hash of
+/// rustc's `FxHasher`): the maps here hold a scan's few dozen keys, where SipHash's
+/// protection against crafted keys costs more than the lookups themselves.
+#[derive(Default, Clone, Copy)]
+pub struct KeyHasher(u64);
+
+const SEED: u64 = 0x51_7c_c1_b7_27_22_0a_95;
+
+impl Hasher for KeyHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+
+    fn write_u64(&mut self, value: u64) {
+        self.0 = (self.0.rotate_left(5) ^ value).wrapping_mul(SEED);
+    }
+
+    fn write_usize(&mut self, value: usize) {
+        self.write_u64(value as u64);
+    }
+
+    fn write_u32(&mut self, value: u32) {
+        self.write_u64(u64::from(value));
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+/// A `HashMap` with [`KeyHasher`].
+pub type KeyMap<K, V> = HashMap<K, V, BuildHasherDefault<KeyHasher>>;
+/// A `HashSet` with [`KeyHasher`].
+pub type KeySet<K> = HashSet<K, BuildHasherDefault<KeyHasher>>;
+
+/// The hash of a sorted key set (the merge's index).
+fn hash_keys(keys: &[u64]) -> u64 {
+    let mut hasher = KeyHasher::default();
+    for &key in keys {
+        hasher.write_u64(key);
+    }
+    hasher.write_usize(keys.len());
+    hasher.finish()
+}
 
 /// One hypothesis: its objects (sorted keys), log weight and total rate (Hz).
 #[derive(Debug, Clone, PartialEq)]
@@ -148,12 +198,16 @@ pub fn fsum(values: impl IntoIterator<Item = f64>) -> f64 {
 }
 
 /// Children being merged (`merge`): one entry per distinct set of objects, in the order
-/// the sets first appeared.
+/// the sets first appeared. The index maps a key set's hash to its first entry; entries
+/// whose sets share a hash are chained (`next`), so no key set is stored twice.
 #[derive(Debug, Default)]
 pub struct Merged {
-    index: HashMap<Vec<u64>, usize>,
+    index: KeyMap<u64, usize>,
+    next: Vec<usize>,
     entries: Vec<Hypothesis>,
 }
+
+const END: usize = usize::MAX;
 
 impl Merged {
     pub fn new() -> Merged {
@@ -163,20 +217,34 @@ impl Merged {
     /// Adds a child: a new entry for a new set of objects, else its probability added
     /// to the entry's (the entry keeps its first rate).
     pub fn add(&mut self, keys: Vec<u64>, log_weight: f64, rate: f64) {
-        match self.index.get(&keys) {
-            Some(&at) => {
-                let entry = &mut self.entries[at];
-                entry.log_weight = log_add(entry.log_weight, log_weight);
-            }
+        let hash = hash_keys(&keys);
+        let new = self.entries.len();
+        let mut at = match self.index.get(&hash) {
+            Some(&first) => first,
             None => {
-                self.index.insert(keys.clone(), self.entries.len());
-                self.entries.push(Hypothesis {
-                    log_weight,
-                    keys,
-                    rate,
-                });
+                self.index.insert(hash, new);
+                END
             }
+        };
+        let mut last = END;
+        while at != END {
+            let entry = &mut self.entries[at];
+            if entry.keys == keys {
+                entry.log_weight = log_add(entry.log_weight, log_weight);
+                return;
+            }
+            last = at;
+            at = self.next[at];
         }
+        if last != END {
+            self.next[last] = new;
+        }
+        self.next.push(END);
+        self.entries.push(Hypothesis {
+            log_weight,
+            keys,
+            rate,
+        });
     }
 
     pub fn len(&self) -> usize {
@@ -247,8 +315,24 @@ pub fn with_key(keys: &[u64], key: u64) -> Vec<u64> {
 
 /// Sorted `keys` with `old` replaced by `new` (`(keys - {old}) | {new}`).
 pub fn replaced(keys: &[u64], old: u64, new: u64) -> Vec<u64> {
-    let without: Vec<u64> = keys.iter().copied().filter(|&k| k != old).collect();
-    with_key(&without, new)
+    let mut result = Vec::with_capacity(keys.len() + 1);
+    let mut placed = false;
+    for &key in keys {
+        if key == old {
+            continue;
+        }
+        if !placed && new <= key {
+            placed = true;
+            if new < key {
+                result.push(new);
+            }
+        }
+        result.push(key);
+    }
+    if !placed {
+        result.push(new);
+    }
+    result
 }
 
 /// Whether sorted `keys` holds `key`.
@@ -398,6 +482,10 @@ mod tests {
         assert_eq!(with_key(&[1, 5, 9], 6), vec![1, 5, 6, 9]);
         assert_eq!(with_key(&[1, 5], 5), vec![1, 5]);
         assert_eq!(replaced(&[1, 5, 9], 5, 12), vec![1, 9, 12]);
+        assert_eq!(replaced(&[1, 5, 9], 5, 3), vec![1, 3, 9]);
+        assert_eq!(replaced(&[1, 5, 9], 1, 9), vec![5, 9]);
+        assert_eq!(replaced(&[1, 5, 9], 9, 0), vec![0, 1, 5]);
+        assert_eq!(replaced(&[], 9, 4), vec![4]);
         assert_eq!(union(&[1, 4, 8], &[2, 4, 9]), vec![1, 2, 4, 8, 9]);
         assert!(holds(&[1, 4, 8], 4) && !holds(&[1, 4, 8], 5));
         let cluster = Cluster::of(vec![h(0.0, &[3, 1], 0.0), h(0.0, &[2, 3], 0.0)]);

@@ -764,7 +764,7 @@ struct PyScanExpansion {
 }
 
 /// Keys, values and labels of the versions (`ScanArrays`' first three).
-type TrackArgs = (Vec<u64>, Vec<f64>, Vec<i64>);
+type TrackArgs = (Vec<u64>, Vec<f64>, Vec<Option<String>>);
 /// The given clusters: ids, sizes, hypothesis sizes, keys, log weights, rates.
 type ClusterArgs = (
     Vec<usize>,
@@ -775,7 +775,7 @@ type ClusterArgs = (
     Vec<f64>,
 );
 /// The options: kinds, labels, keys, values.
-type OptionArgs = (Vec<u8>, Vec<i64>, Vec<u64>, Vec<f64>);
+type OptionArgs = (Vec<u8>, Vec<Option<String>>, Vec<u64>, Vec<f64>);
 /// Counts, keys and values of the options' presence or existing entries.
 type EntryArgs = (Vec<usize>, Vec<u64>, Vec<f64>);
 /// The result: untouched clusters; new clusters (sizes, key sizes, keys); their

@@ -37,6 +37,7 @@ except ImportError:  # not built: ScanExpander raises EngineUnavailable
     _core = None  # type: ignore[assignment]
 
 _SETTLED, _OPTIONS = 1, 0
+_UNUSED = (0.0, 0.0, 0.0, 0.0, 0.0)
 _BIRTH = 0
 
 
@@ -60,36 +61,12 @@ class ScanExpander:
     ) -> tuple[Cluster, ...]:
         """The scan's clusters, as ``MultipleHypothesisFilter._expand_scan`` gives them
         (the same order); the versions made are added to ``table``."""
-        given = self._given(clusters, options, table)
-        labels: dict[str, int] = {}
-        tracks = table.tracks
-        track_keys: list[int] = []
-        track_rates: list[float] = []
-        track_labels: list[int] = []
-
-        def version(track: Track) -> None:
-            track_keys.append(track.key)
-            track_rates.append(track.rate)
-            label = track.label
-            track_labels.append(-1 if label is None else labels.setdefault(label, len(labels)))
-
-        sizes: list[int] = []
-        hypothesis_sizes: list[int] = []
-        keys: list[int] = []
-        weights: list[float] = []
-        rates: list[float] = []
-        for i in given:
-            cluster = clusters[i]
-            for key in cluster.keys:
-                version(tracks[key])
-            sizes.append(len(cluster.hypotheses))
-            for h in cluster.hypotheses:
-                hypothesis_sizes.append(len(h.tracks))
-                keys.extend(h.tracks)
-                weights.append(h.log_weight)
-                rates.append(h.rate)
+        factorised = self._factorised
+        add = table.add
+        by_label = table.by_label
+        versions: list[Track] = []  # every version the options name
         kinds: list[int] = []
-        option_labels: list[int] = []
+        labels: list[str | None] = []
         option_keys: list[int] = []
         values: list[float] = []
         presence_counts: list[int] = []
@@ -99,25 +76,29 @@ class ScanExpander:
         existing_keys: list[int] = []
         existing_values: list[float] = []
         new_tracks: dict[int, Track] = {}
+        involved: set[int] = set()  # objects whose clusters the options may touch (mht)
+        settled_keys: list[int] = []
         for option in options:
             if isinstance(option, SettledUpdate):
-                version(option.updated)
-                table.add(option.updated, origin=option.old_key, fresh=True)
+                updated = option.updated
+                versions.append(updated)
+                add(updated, origin=option.old_key, fresh=True)
+                settled_keys.append(option.old_key)
                 kinds.append(_SETTLED)
-                option_labels.append(-1)
-                option_keys += (option.old_key, option.updated.key)
-                values += (0.0, 0.0, 0.0, 0.0, 0.0)
+                labels.append(None)
+                option_keys += (option.old_key, updated.key)
+                values += _UNUSED
                 presence_counts.append(0)
                 existing_counts.append(0)
                 continue
             new_track = option.new_track
             new_tracks[new_track.key] = new_track
-            version(new_track)
-            if not self._factorised:  # paper: the new object is a child of every parent
-                table.add(new_track, fresh=True)
+            versions.append(new_track)
+            if not factorised:  # paper: the new object is a child of every parent
+                add(new_track, fresh=True)
             label = option.measurement.label
             kinds.append(_OPTIONS)
-            option_labels.append(-1 if label is None else labels.setdefault(label, len(labels)))
+            labels.append(label)
             option_keys += (new_track.key, 0)
             values += (
                 option.clutter_rate,
@@ -126,21 +107,39 @@ class ScanExpander:
                 option.new_rate,
                 option.new_log,
             )
-            presence_counts.append(len(option.presence))
-            for key, (rate, log_num) in option.presence.items():
+            presence = option.presence
+            presence_counts.append(len(presence))
+            for key, (rate, log_num) in presence.items():
                 presence_keys.append(key)
                 presence_values += (rate, log_num)
-            existing_counts.append(len(option.existing))
-            for old_key, (updated, log_num, rate_change) in option.existing.items():
-                version(updated)
-                table.add(updated, origin=old_key, fresh=True)
+            existing = option.existing
+            existing_counts.append(len(existing))
+            for old_key, (updated, log_num, rate_change) in existing.items():
+                versions.append(updated)
+                add(updated, origin=old_key, fresh=True)
                 existing_keys += (old_key, updated.key)
                 existing_values += (log_num, rate_change)
-        untouched, (sizes, key_sizes, cluster_keys), hypotheses, made, next_key = self._core.scan(
+            if factorised:
+                involved.update(existing)
+                involved.update(presence)
+                if label is not None:
+                    involved.update(by_label.get(label, ()))
+        given, settled = _given(clusters, involved, settled_keys, factorised)
+        for i in given:
+            versions.extend([table.tracks[k] for k in clusters[i].keys])
+        hypotheses = [h for i in given for h in clusters[i].hypotheses]
+        untouched, (sizes, key_sizes, cluster_keys), new, made, next_key = self._core.scan(
             (table._first_new, table.next_key, len(clusters)),
-            (track_keys, track_rates, track_labels),
-            (given, sizes, hypothesis_sizes, keys, weights, rates),
-            (kinds, option_labels, option_keys, values),
+            ([t.key for t in versions], [t.rate for t in versions], [t.label for t in versions]),
+            (
+                given,
+                [len(clusters[i].hypotheses) for i in given],
+                [len(h.tracks) for h in hypotheses],
+                [k for h in hypotheses for k in h.tracks],
+                [h.log_weight for h in hypotheses],
+                [h.rate for h in hypotheses],
+            ),
+            (kinds, labels, option_keys, values),
             (presence_counts, presence_keys, presence_values),
             (existing_counts, existing_keys, existing_values),
         )
@@ -150,39 +149,28 @@ class ScanExpander:
             else:
                 table.copy_unlabeled(source, key)
         table.next_key = next_key
-        taken = set(given).difference(untouched)
+        taken = settled.union(given).difference(untouched)
         kept = [c for i, c in enumerate(clusters) if i not in taken] if taken else list(clusters)
-        hypothesis_sizes, new_keys, new_weights, new_rates = hypotheses
-        new = _clusters(
-            sizes, key_sizes, cluster_keys, hypothesis_sizes, new_keys, new_weights, new_rates
-        )
-        return (*kept, *new)
+        return (*kept, *_clusters(sizes, key_sizes, cluster_keys, *new))
 
-    def _given(
-        self,
-        clusters: Sequence[Cluster],
-        options: Sequence[DetectionOptions | SettledUpdate],
-        table: _TrackTable,
-    ) -> list[int]:
-        """The indices of the clusters the scan can touch: under ``paper`` every cluster
-        (one global one); under ``mht`` the owners of the objects the options name and
-        of the holders of their labels (the clusters ``_ClusterBook.owners`` finds)."""
-        if not self._factorised:
-            return list(range(len(clusters)))
-        involved: set[int] = set()
-        for option in options:
-            if isinstance(option, SettledUpdate):
-                involved.add(option.old_key)
-                continue
-            involved.update(option.existing)
-            involved.update(option.presence)
-            label = option.measurement.label
-            if label is not None:
-                involved.update(table.by_label.get(label, ()))
-        if not involved:
-            return []
-        owner = {k: i for i, c in enumerate(clusters) for k in c.keys}
-        return sorted({owner[k] for k in involved if k in owner})
+
+def _given(
+    clusters: Sequence[Cluster], involved: set[int], settled_keys: list[int], factorised: bool
+) -> tuple[list[int], set[int]]:
+    """The indices of the clusters the scan can touch, in order: under ``paper`` every
+    cluster (one global one); under ``mht`` the owners of the ``involved`` objects (those
+    the options name and the holders of their labels: the clusters
+    ``_ClusterBook.owners`` finds). Apart: the clusters of settled updates' objects,
+    which no other option touches (:class:`SettledUpdate`): the core replaces them
+    without reading them."""
+    if not factorised:
+        return list(range(len(clusters))), set()
+    if not involved and not settled_keys:
+        return [], set()
+    owner = {k: i for i, c in enumerate(clusters) for k in c.keys}
+    given = {owner[k] for k in involved if k in owner}
+    settled = {owner[k] for k in settled_keys if k in owner}
+    return sorted(given), settled - given
 
 
 def _clusters(
@@ -198,6 +186,13 @@ def _clusters(
     result: list[Cluster] = []
     at = h = key_at = 0
     for size, key_size in zip(sizes, key_sizes, strict=True):
+        if size == 1 and key_size == 1 and hypothesis_sizes[h] == 1:  # certain: one object
+            key = frozenset(keys[at : at + 1])
+            result.append(Cluster((Hypothesis(weights[h], key, rates[h]),), key))
+            at += 1
+            h += 1
+            key_at += 1
+            continue
         hypotheses = []
         for _ in range(size):
             end = at + hypothesis_sizes[h]

@@ -267,7 +267,7 @@ def test_bad_arrays_are_a_value_error_naming_the_argument() -> None:
     with pytest.raises(ValueError, match="hypothesis_keys"):
         expansion.scan(
             (5, 5, 1),
-            ([1], [1.0], [-1]),
+            ([1], [1.0], [None]),
             ([0], [1], [2], [1], [0.0], [1.0]),
             ([], [], [], []),
             empty,
@@ -278,7 +278,7 @@ def test_bad_arrays_are_a_value_error_naming_the_argument() -> None:
             (5, 7, 1),
             ([], [], []),
             ([0], [1], [1], [1], [0.0], [1.0]),
-            ([1], [-1], [1, 6], [0.0] * 5),
+            ([1], [None], [1, 6], [0.0] * 5),
             ([0], [], []),
             ([0], [], []),
         )
