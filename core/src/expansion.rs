@@ -110,6 +110,10 @@ pub enum ScanOption {
         old_key: u64,
         updated: u64,
     },
+    /// A settled or certain update the caller made before the rest of the scan came
+    /// here: its updated versions (`existing`' old and updated keys) enter the table,
+    /// its cluster is already among the clusters given.
+    Done(Vec<Existing>),
     Detection(DetectionOptions),
 }
 
@@ -698,6 +702,12 @@ pub fn expand_scan(scan: Scan) -> KernelResult<Expanded> {
                 book.put(vec![Cluster::certain(*updated, table.rate(*updated)?)]);
                 continue;
             }
+            ScanOption::Done(versions) => {
+                for e in versions {
+                    table.add(e.updated, Some(e.old_key), true)?;
+                }
+                continue;
+            }
             ScanOption::Detection(option) => option,
         };
         if !settings.mht {
@@ -761,7 +771,8 @@ pub struct ScanArrays {
     pub hypothesis_keys: Vec<u64>,
     pub log_weights: Vec<f64>,
     pub rates: Vec<f64>,
-    /// Per option: `1` settled, `0` detection options; its detection's label; two keys
+    /// Per option: `0` detection options, `1` settled, `2` done (its versions in
+    /// `existing_keys`); its detection's label; two keys
     /// (settled: old, updated; options: the new object's, unused); five values
     /// (options: clutter rate, log clutter, the new object's rate, base f_new, its log
     /// numerator; settled: unused).
@@ -884,12 +895,33 @@ impl ScanArrays {
         for j in 0..n_options {
             let label = labels.id(option_labels.next().flatten());
             let keys = &self.option_keys[2 * j..2 * j + 2];
-            if self.option_kinds[j] == 1 {
-                options.push(ScanOption::Settled {
-                    old_key: keys[0],
-                    updated: keys[1],
-                });
-                continue;
+            match self.option_kinds[j] {
+                0 => {}
+                1 => {
+                    options.push(ScanOption::Settled {
+                        old_key: keys[0],
+                        updated: keys[1],
+                    });
+                    continue;
+                }
+                2 => {
+                    let done = existing_keys[j]
+                        .chunks_exact(2)
+                        .map(|k| Existing {
+                            old_key: k[0],
+                            updated: k[1],
+                            log_num: 0.0,
+                            rate_change: 0.0,
+                        })
+                        .collect();
+                    options.push(ScanOption::Done(done));
+                    continue;
+                }
+                other => {
+                    return Err(KernelError::Shape(format!(
+                        "option_kinds: expected 0 (options), 1 (settled) or 2 (done), got {other}"
+                    )))
+                }
             }
             let values = &self.option_values[5 * j..5 * j + 5];
             let presence = presence_keys[j]

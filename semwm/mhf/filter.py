@@ -421,12 +421,12 @@ class MultipleHypothesisFilter:
     ) -> tuple[Cluster, ...]:
         """Step 5: the scan's clusters, detection by detection: the clusters a detection
         touches joined (:func:`_product`), expanded (:meth:`_expand`) and split
-        (:meth:`_split`). The Rust engine computes the same in one call
-        (:mod:`semwm.mhf.rust_expansion`, ``core/src/expansion.rs``)."""
-        if self._rust_expansion is not None:
-            return self._rust_expansion.expand(clusters, options, table)
+        (:meth:`_split`). With the Rust engine, the rest of the scan from its first
+        detection that needs them is computed in one call (:mod:`semwm.mhf.rust_expansion`,
+        ``core/src/expansion.rs``); settled and certain updates before it are bookkeeping
+        (no hypothesis is built) and stay here."""
         book = _ClusterBook(clusters)
-        for option in options:
+        for position, option in enumerate(options):
             if isinstance(option, SettledUpdate):  # what _certain_update would give
                 table.add(option.updated, origin=option.old_key, fresh=True)
                 book.take(book.owners({option.old_key}))
@@ -448,6 +448,9 @@ class MultipleHypothesisFilter:
                 book.take(touched)
                 book.put((certain,))
                 continue
+            if self._rust_expansion is not None:  # this detection and the rest: in Rust
+                self._rust_expansion.expand(book, options, position, table)
+                break
             merged = _product(book.take(touched), self.ratio, self.max_hypotheses)
             expanded = self._expand(merged, option, table)
             book.put(self._split(expanded, table.tracks))
@@ -847,6 +850,11 @@ class _ClusterBook:
 
     def ids(self) -> set[int]:
         return set(self._clusters)
+
+    @property
+    def next_id(self) -> int:
+        """The id the next cluster put gets (every id so far is below it)."""
+        return self._next
 
     def get(self, cluster_id: int) -> Cluster:
         return self._clusters[cluster_id]

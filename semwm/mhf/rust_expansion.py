@@ -1,15 +1,17 @@
 """The Rust engine's expansion of one scan: step 5 of :mod:`semwm.mhf.filter`
-(``MultipleHypothesisFilter._expand_scan``: ``_product``, ``_expand``, ``_split``,
-``_certain_update``, merging and pruning) computed by the compiled core
-(``core/src/expansion.rs``, ``core/src/hypotheses.rs``) in one call per scan.
+(``_product``, ``_expand``, ``_split``, ``_certain_update``, merging and pruning)
+computed by the compiled core (``core/src/expansion.rs``, ``core/src/hypotheses.rs``),
+at most once per scan: ``MultipleHypothesisFilter._expand_scan`` does the settled and
+certain updates (bookkeeping: no hypothesis is built) with either engine and hands the
+rest of the scan to :class:`ScanExpander` at its first detection that needs the algebra.
 
 The Python methods are the specification (``tests/engines/`` holds both to the same
 hypotheses). What crosses the boundary is flat lists, not an object per hypothesis:
 
-- in: the clusters the scan can touch (those holding an object some detection may
-  update, whose presence makes a birth likelier, or that holds a detection's label);
-  every version they hold and every version the options name (key, rate, label); the
-  options, in the scan's order;
+- in: the clusters the rest of the scan can touch (those holding an object some
+  detection may update, whose presence makes a birth likelier, or that holds a
+  detection's label); every version they hold and every version the options name (key,
+  rate, label); the options, in the scan's order;
 - out: the given clusters no detection touched, the new clusters, and the versions the
   expansion made (births, copies that gave a label up) in the order their keys were
   given, which :class:`ScanExpander` then makes in the scan's track table as the Python
@@ -29,14 +31,14 @@ from semwm.mhf.association import DetectionOptions, SettledUpdate
 from semwm.mhf.state import Cluster, Hypothesis, Track
 
 if TYPE_CHECKING:
-    from semwm.mhf.filter import _TrackTable
+    from semwm.mhf.filter import _ClusterBook, _TrackTable
 
 try:
     from semwm import _core
 except ImportError:  # not built: ScanExpander raises EngineUnavailable
     _core = None  # type: ignore[assignment]
 
-_SETTLED, _OPTIONS = 1, 0
+_OPTIONS, _SETTLED, _DONE = 0, 1, 2
 _UNUSED = (0.0, 0.0, 0.0, 0.0, 0.0)
 _BIRTH = 0
 
@@ -55,12 +57,16 @@ class ScanExpander:
 
     def expand(
         self,
-        clusters: Sequence[Cluster],
+        book: _ClusterBook,
         options: Sequence[DetectionOptions | SettledUpdate],
+        start: int,
         table: _TrackTable,
-    ) -> tuple[Cluster, ...]:
-        """The scan's clusters, as ``MultipleHypothesisFilter._expand_scan`` gives them
-        (the same order); the versions made are added to ``table``."""
+    ) -> None:
+        """The scan's options from ``start`` on, as ``MultipleHypothesisFilter._expand_scan``
+        expands them: ``book`` ends holding the clusters the Python methods would leave
+        in it, ``table`` the versions they would make. The options before ``start``
+        were settled or certain updates, already in ``book`` and ``table``; so are the
+        versions of option ``start``."""
         factorised = self._factorised
         add = table.add
         by_label = table.by_label
@@ -77,13 +83,31 @@ class ScanExpander:
         existing_values: list[float] = []
         new_tracks: dict[int, Track] = {}
         involved: set[int] = set()  # objects whose clusters the options may touch (mht)
-        settled_keys: list[int] = []
-        for option in options:
+        settled_keys: set[int] = set()
+        for position, option in enumerate(options):
+            if position < start:  # done: the core only learns the versions it made
+                if isinstance(option, SettledUpdate):
+                    # nothing reads them: a scan with settled updates has no labels and
+                    # no appearance relations (Associator._settled), and they are mht's
+                    continue
+                pairs = tuple((k, found[0]) for k, found in option.existing.items())
+                kinds.append(_DONE)
+                labels.append(None)
+                option_keys += (0, 0)
+                values += _UNUSED
+                presence_counts.append(0)
+                existing_counts.append(len(pairs))
+                for old_key, updated in pairs:
+                    versions.append(updated)
+                    existing_keys += (old_key, updated.key)
+                    existing_values += (0.0, 0.0)
+                continue
+            later = position > start  # its versions are not in the table yet
             if isinstance(option, SettledUpdate):
                 updated = option.updated
                 versions.append(updated)
                 add(updated, origin=option.old_key, fresh=True)
-                settled_keys.append(option.old_key)
+                settled_keys.add(option.old_key)
                 kinds.append(_SETTLED)
                 labels.append(None)
                 option_keys += (option.old_key, updated.key)
@@ -94,7 +118,7 @@ class ScanExpander:
             new_track = option.new_track
             new_tracks[new_track.key] = new_track
             versions.append(new_track)
-            if not factorised:  # paper: the new object is a child of every parent
+            if later and not factorised:  # paper: the new object is a child of every parent
                 add(new_track, fresh=True)
             label = option.measurement.label
             kinds.append(_OPTIONS)
@@ -116,7 +140,8 @@ class ScanExpander:
             existing_counts.append(len(existing))
             for old_key, (updated, log_num, rate_change) in existing.items():
                 versions.append(updated)
-                add(updated, origin=old_key, fresh=True)
+                if later:
+                    add(updated, origin=old_key, fresh=True)
                 existing_keys += (old_key, updated.key)
                 existing_values += (log_num, rate_change)
             if factorised:
@@ -124,16 +149,23 @@ class ScanExpander:
                 involved.update(presence)
                 if label is not None:
                     involved.update(by_label.get(label, ()))
-        given, settled = _given(clusters, involved, settled_keys, factorised)
-        for i in given:
-            versions.extend([table.tracks[k] for k in clusters[i].keys])
-        hypotheses = [h for i in given for h in clusters[i].hypotheses]
+        if factorised:
+            given_ids = book.owners(involved)
+            settled = book.owners(settled_keys) - given_ids
+        else:  # paper: every cluster (one global one)
+            given_ids, settled = book.ids(), set()
+        given = sorted(given_ids)
+        clusters = [book.get(i) for i in given]
+        tracks = table.tracks
+        for cluster in clusters:
+            versions.extend([tracks[k] for k in cluster.keys])
+        hypotheses = [h for c in clusters for h in c.hypotheses]
         untouched, (sizes, key_sizes, cluster_keys), new, made, next_key = self._core.scan(
-            (table._first_new, table.next_key, len(clusters)),
+            (table._first_new, table.next_key, book.next_id),
             ([t.key for t in versions], [t.rate for t in versions], [t.label for t in versions]),
             (
                 given,
-                [len(clusters[i].hypotheses) for i in given],
+                [len(c.hypotheses) for c in clusters],
                 [len(h.tracks) for h in hypotheses],
                 [k for h in hypotheses for k in h.tracks],
                 [h.log_weight for h in hypotheses],
@@ -149,28 +181,8 @@ class ScanExpander:
             else:
                 table.copy_unlabeled(source, key)
         table.next_key = next_key
-        taken = settled.union(given).difference(untouched)
-        kept = [c for i, c in enumerate(clusters) if i not in taken] if taken else list(clusters)
-        return (*kept, *_clusters(sizes, key_sizes, cluster_keys, *new))
-
-
-def _given(
-    clusters: Sequence[Cluster], involved: set[int], settled_keys: list[int], factorised: bool
-) -> tuple[list[int], set[int]]:
-    """The indices of the clusters the scan can touch, in order: under ``paper`` every
-    cluster (one global one); under ``mht`` the owners of the ``involved`` objects (those
-    the options name and the holders of their labels: the clusters
-    ``_ClusterBook.owners`` finds). Apart: the clusters of settled updates' objects,
-    which no other option touches (:class:`SettledUpdate`): the core replaces them
-    without reading them."""
-    if not factorised:
-        return list(range(len(clusters))), set()
-    if not involved and not settled_keys:
-        return [], set()
-    owner = {k: i for i, c in enumerate(clusters) for k in c.keys}
-    given = {owner[k] for k in involved if k in owner}
-    settled = {owner[k] for k in settled_keys if k in owner}
-    return sorted(given), settled - given
+        book.take(settled.union(given).difference(untouched))
+        book.put(_clusters(sizes, key_sizes, cluster_keys, *new))
 
 
 def _clusters(

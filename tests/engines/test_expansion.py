@@ -75,11 +75,18 @@ def _cases(draw: st.DrawFn, model: str) -> Case:
     if model == "paper":
         groups = [list(range(n))]
     else:
-        owner = [draw(st.integers(0, 2)) for _ in range(n)]
-        groups = [[k for k in range(n) if owner[k] == g] for g in range(3)]
+        owner = [draw(st.integers(0, n - 1)) for _ in range(n)]
+        groups = [[k for k in range(n) if owner[k] == g] for g in range(n)]
     clusters = []
+    certain = model == "mht" and draw(st.booleans())  # some objects alone and certain
     for group in groups:
         if not group:
+            continue
+        if certain and len(group) == 1:
+            (k,) = group
+            clusters.append(
+                Cluster.of(prune(merge([(frozenset({k}), 0.0, tracks[k].rate)]), 0.0, 1))
+            )
             continue
         weights: dict[frozenset[int], float] = {}
         for _ in range(draw(st.integers(1, 4))):
@@ -94,6 +101,25 @@ def _cases(draw: st.DrawFn, model: str) -> Case:
     named: set[int] = set()
     labelled = False
     for _ in range(draw(st.integers(1, 4))):
+        if model == "mht" and draw(st.booleans()):  # sure of one object: a certain update?
+            k = draw(st.integers(0, n - 1))
+            updated = _track(next_key, draw(_RATES), tracks[k].label)
+            new_track = _track(next_key + 1, draw(_RATES), None)
+            next_key += 2
+            named.add(k)
+            options.append(
+                DetectionOptions(
+                    _measurement(None),
+                    0.5,
+                    -30.0,
+                    new_track,
+                    0.3,
+                    -30.0,
+                    {},
+                    {k: (updated, 0.0, updated.rate - tracks[k].rate)},
+                )
+            )
+            continue
         label = draw(_LABELS)
         labelled |= label is not None
         clutter_rate = draw(st.sampled_from([0.0, 0.5, 2.0]))
@@ -188,7 +214,7 @@ def _assert_same(case: Case) -> None:
             assert abs(h.rate - e.rate) <= TOL
 
 
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=600, deadline=None)
 @given(_cases("mht"))
 def test_expansion_of_a_scan_mht(case: Case) -> None:
     _assert_same(case)
