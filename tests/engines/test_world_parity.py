@@ -212,3 +212,25 @@ def test_same_world_of_a_static_grid(seed: int) -> None:
         objects += _assert_same_frame(python, rust, frames)
         frames += 1
     assert frames > 20 and objects > 20 * frames
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_same_world_under_the_paper_model(seed: int) -> None:
+    """robocup (2 s: robots reporting their own labelled positions) under the ``paper``
+    association model (paper 002 eqs. 5-8: one global cluster, F per parent): the
+    expansion's other model, with labels, frame by frame. (The shipped knowledge under
+    ``paper`` keeps sim1's and sim2's worlds empty: tests/sim/test_paper_claims.py.)"""
+    scenario = make_scenario("robocup", seed, duration=2.0)
+    knowledge = _knowledge(scenario.knowledge_file)
+    world = knowledge.world.model_copy(update={"association_model": "paper"})
+    knowledge = knowledge.model_copy(update={"world": world})
+    python = WorldModel(knowledge, engine="python")
+    rust = WorldModel(knowledge, engine="rust")
+    frames = objects = 0
+    for scan in scans(scenario.detections):
+        python.ingest(scan)
+        rust.ingest(scan)
+        objects += _assert_same_frame(python, rust, frames)
+        frames += 1
+    assert frames > 100 and objects > 3 * frames
+    assert python.hypothesis_count > 1  # hypotheses, not one certain world
