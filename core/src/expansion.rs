@@ -753,43 +753,79 @@ pub fn expand_scan(scan: Scan) -> KernelResult<Expanded> {
     })
 }
 
+/// A scan's versions as they cross the boundary: key, rate (f_existing, Hz) and label of
+/// every version the given clusters hold and the options name.
+#[derive(Debug, Clone, Default)]
+pub struct TrackArrays {
+    pub keys: Vec<u64>,
+    pub rates: Vec<f64>,
+    pub labels: Vec<Option<String>>,
+}
+
+/// The given clusters: per cluster its index and number of hypotheses; per hypothesis
+/// its number of keys, log weight and rate; the keys one hypothesis after the other.
+#[derive(Debug, Clone, Default)]
+pub struct ClusterArrays {
+    pub ids: Vec<usize>,
+    pub sizes: Vec<usize>,
+    pub hypothesis_sizes: Vec<usize>,
+    pub keys: Vec<u64>,
+    pub log_weights: Vec<f64>,
+    pub rates: Vec<f64>,
+}
+
+/// The options, in the scan's order: per option its kind (`0` detection options, `1`
+/// settled, `2` done: its versions in the existing entries), its detection's label,
+/// two keys (settled: old, updated; options: the new object's, unused) and five values
+/// (options: clutter rate, log clutter, the new object's rate, base f_new, its log
+/// numerator; others: unused).
+#[derive(Debug, Clone, Default)]
+pub struct OptionArrays {
+    pub kinds: Vec<u8>,
+    pub labels: Vec<Option<String>>,
+    pub keys: Vec<u64>,
+    pub values: Vec<f64>,
+}
+
+/// Entries of the options (presence: per entry its key, then rate and log numerator;
+/// existing: its old and updated keys, then log numerator and rate change): per option
+/// its number of entries, then the entries' keys and values one after the other.
+#[derive(Debug, Clone, Default)]
+pub struct EntryArrays {
+    pub counts: Vec<usize>,
+    pub keys: Vec<u64>,
+    pub values: Vec<f64>,
+}
+
+impl EntryArrays {
+    /// Each option's keys (`keys_per_entry` per entry) and values (two per entry),
+    /// every length checked.
+    fn per_option(
+        &self,
+        name: &str,
+        options: usize,
+        keys_per_entry: usize,
+    ) -> KernelResult<Vec<(&[u64], &[f64])>> {
+        length(&format!("{name}_counts"), self.counts.len(), options)?;
+        let widths: Vec<usize> = self.counts.iter().map(|n| keys_per_entry * n).collect();
+        let keys = runs(&format!("{name}_keys"), &self.keys, &widths)?;
+        let widths: Vec<usize> = self.counts.iter().map(|n| 2 * n).collect();
+        let values = runs(&format!("{name}_values"), &self.values, &widths)?;
+        Ok(keys.into_iter().zip(values).collect())
+    }
+}
+
 /// A scan as flat arrays, as it crosses the boundary (`semwm/mhf/rust_expansion.py`
 /// packs it): no object per hypothesis or per option.
 #[derive(Debug, Clone, Default)]
 pub struct ScanArrays {
     /// `(first_new, next_key, cluster_count)`.
     pub counters: (u64, u64, usize),
-    /// Every version the given clusters hold and the options name: key, rate, label.
-    pub track_keys: Vec<u64>,
-    pub track_rates: Vec<f64>,
-    pub track_labels: Vec<Option<String>>,
-    /// Per given cluster its index and number of hypotheses; per hypothesis its number
-    /// of keys, log weight and rate; the keys one hypothesis after the other.
-    pub cluster_ids: Vec<usize>,
-    pub cluster_sizes: Vec<usize>,
-    pub hypothesis_sizes: Vec<usize>,
-    pub hypothesis_keys: Vec<u64>,
-    pub log_weights: Vec<f64>,
-    pub rates: Vec<f64>,
-    /// Per option: `0` detection options, `1` settled, `2` done (its versions in
-    /// `existing_keys`); its detection's label; two keys
-    /// (settled: old, updated; options: the new object's, unused); five values
-    /// (options: clutter rate, log clutter, the new object's rate, base f_new, its log
-    /// numerator; settled: unused).
-    pub option_kinds: Vec<u8>,
-    pub option_labels: Vec<Option<String>>,
-    pub option_keys: Vec<u64>,
-    pub option_values: Vec<f64>,
-    /// Per option its number of presence entries, then per entry: key; rate, log
-    /// numerator.
-    pub presence_counts: Vec<usize>,
-    pub presence_keys: Vec<u64>,
-    pub presence_values: Vec<f64>,
-    /// Per option its number of existing entries, then per entry: old key, updated
-    /// key; log numerator, rate change.
-    pub existing_counts: Vec<usize>,
-    pub existing_keys: Vec<u64>,
-    pub existing_values: Vec<f64>,
+    pub tracks: TrackArrays,
+    pub clusters: ClusterArrays,
+    pub options: OptionArrays,
+    pub presence: EntryArrays,
+    pub existing: EntryArrays,
 }
 
 fn length(name: &str, got: usize, expected: usize) -> KernelResult<()> {
@@ -831,132 +867,116 @@ fn runs<'a, T>(name: &str, items: &'a [T], counts: &[usize]) -> KernelResult<Vec
 impl ScanArrays {
     /// The scan, every length checked (`ValueError` naming the argument).
     pub fn into_scan(self, settings: Settings) -> KernelResult<Scan> {
-        let n_tracks = self.track_keys.len();
-        length("track_rates", self.track_rates.len(), n_tracks)?;
-        length("track_labels", self.track_labels.len(), n_tracks)?;
+        let ScanArrays {
+            counters,
+            tracks: versions,
+            clusters: given,
+            options: given_options,
+            presence,
+            existing,
+        } = self;
+        let n_tracks = versions.keys.len();
+        length("track_rates", versions.rates.len(), n_tracks)?;
+        length("track_labels", versions.labels.len(), n_tracks)?;
         let mut labels = Labels::default();
         let mut tracks = KeyMap::with_capacity_and_hasher(n_tracks, Default::default());
-        for ((key, rate), label) in self
-            .track_keys
+        for ((key, rate), label) in versions
+            .keys
             .into_iter()
-            .zip(self.track_rates)
-            .zip(self.track_labels)
+            .zip(versions.rates)
+            .zip(versions.labels)
         {
             let label = labels.id(label);
             tracks.insert(key, TrackInfo { rate, label });
         }
-        length(
-            "cluster_sizes",
-            self.cluster_sizes.len(),
-            self.cluster_ids.len(),
-        )?;
-        let n_hypotheses: usize = self.cluster_sizes.iter().sum();
+        length("cluster_sizes", given.sizes.len(), given.ids.len())?;
+        let n_hypotheses: usize = given.sizes.iter().sum();
         length(
             "hypothesis_sizes",
-            self.hypothesis_sizes.len(),
+            given.hypothesis_sizes.len(),
             n_hypotheses,
         )?;
-        length("log_weights", self.log_weights.len(), n_hypotheses)?;
-        length("rates", self.rates.len(), n_hypotheses)?;
-        let keys = runs(
-            "hypothesis_keys",
-            &self.hypothesis_keys,
-            &self.hypothesis_sizes,
-        )?;
+        length("log_weights", given.log_weights.len(), n_hypotheses)?;
+        length("rates", given.rates.len(), n_hypotheses)?;
+        let keys = runs("hypothesis_keys", &given.keys, &given.hypothesis_sizes)?;
         let mut hypotheses = keys.into_iter().enumerate().map(|(i, keys)| {
             let mut keys = keys.to_vec();
             keys.sort_unstable();
             Hypothesis {
-                log_weight: self.log_weights[i],
+                log_weight: given.log_weights[i],
                 keys,
-                rate: self.rates[i],
+                rate: given.rates[i],
             }
         });
-        let clusters = self
-            .cluster_ids
+        let clusters = given
+            .ids
             .iter()
-            .zip(&self.cluster_sizes)
+            .zip(&given.sizes)
             .map(|(&id, &size)| (id, Cluster::of(hypotheses.by_ref().take(size).collect())))
             .collect();
-        let n_options = self.option_kinds.len();
-        length("option_labels", self.option_labels.len(), n_options)?;
-        length("option_keys", self.option_keys.len(), 2 * n_options)?;
-        length("option_values", self.option_values.len(), 5 * n_options)?;
-        length("presence_counts", self.presence_counts.len(), n_options)?;
-        length("existing_counts", self.existing_counts.len(), n_options)?;
-        let presence_keys = runs("presence_keys", &self.presence_keys, &self.presence_counts)?;
-        let doubled: Vec<usize> = self.presence_counts.iter().map(|n| 2 * n).collect();
-        let presence_values = runs("presence_values", &self.presence_values, &doubled)?;
-        let doubled: Vec<usize> = self.existing_counts.iter().map(|n| 2 * n).collect();
-        let existing_keys = runs("existing_keys", &self.existing_keys, &doubled)?;
-        let existing_values = runs("existing_values", &self.existing_values, &doubled)?;
+        let n_options = given_options.kinds.len();
+        length("option_labels", given_options.labels.len(), n_options)?;
+        length("option_keys", given_options.keys.len(), 2 * n_options)?;
+        length("option_values", given_options.values.len(), 5 * n_options)?;
+        let presence = presence.per_option("presence", n_options, 1)?;
+        let existing = existing.per_option("existing", n_options, 2)?;
+        let existing: Vec<Vec<Existing>> = existing
+            .into_iter()
+            .map(|(keys, values)| {
+                let mut entries: Vec<Existing> = keys
+                    .chunks_exact(2)
+                    .zip(values.chunks_exact(2))
+                    .map(|(k, v)| Existing {
+                        old_key: k[0],
+                        updated: k[1],
+                        log_num: v[0],
+                        rate_change: v[1],
+                    })
+                    .collect();
+                entries.sort_by_key(|e| e.old_key);
+                entries
+            })
+            .collect();
         let mut options = Vec::with_capacity(n_options);
-        let mut option_labels = self.option_labels.into_iter();
-        for j in 0..n_options {
-            let label = labels.id(option_labels.next().flatten());
-            let keys = &self.option_keys[2 * j..2 * j + 2];
-            match self.option_kinds[j] {
-                0 => {}
-                1 => {
-                    options.push(ScanOption::Settled {
-                        old_key: keys[0],
-                        updated: keys[1],
-                    });
-                    continue;
-                }
-                2 => {
-                    let done = existing_keys[j]
-                        .chunks_exact(2)
-                        .map(|k| Existing {
-                            old_key: k[0],
-                            updated: k[1],
-                            log_num: 0.0,
-                            rate_change: 0.0,
+        let option_labels = given_options.labels.into_iter();
+        for (j, (label, existing)) in option_labels.zip(existing).enumerate() {
+            let label = labels.id(label);
+            let keys = &given_options.keys[2 * j..2 * j + 2];
+            let values = &given_options.values[5 * j..5 * j + 5];
+            options.push(match given_options.kinds[j] {
+                0 => ScanOption::Detection(DetectionOptions {
+                    label,
+                    clutter_rate: values[0],
+                    log_clutter: values[1],
+                    new_key: keys[0],
+                    new_track_rate: values[2],
+                    new_rate: values[3],
+                    new_log: values[4],
+                    presence: presence[j]
+                        .0
+                        .iter()
+                        .zip(presence[j].1.chunks_exact(2))
+                        .map(|(&key, v)| Presence {
+                            key,
+                            rate: v[0],
+                            log_num: v[1],
                         })
-                        .collect();
-                    options.push(ScanOption::Done(done));
-                    continue;
-                }
+                        .collect(),
+                    existing,
+                }),
+                1 => ScanOption::Settled {
+                    old_key: keys[0],
+                    updated: keys[1],
+                },
+                2 => ScanOption::Done(existing),
                 other => {
                     return Err(KernelError::Shape(format!(
                         "option_kinds: expected 0 (options), 1 (settled) or 2 (done), got {other}"
                     )))
                 }
-            }
-            let values = &self.option_values[5 * j..5 * j + 5];
-            let presence = presence_keys[j]
-                .iter()
-                .zip(presence_values[j].chunks_exact(2))
-                .map(|(&key, v)| Presence {
-                    key,
-                    rate: v[0],
-                    log_num: v[1],
-                })
-                .collect();
-            let mut existing: Vec<Existing> = existing_keys[j]
-                .chunks_exact(2)
-                .zip(existing_values[j].chunks_exact(2))
-                .map(|(k, v)| Existing {
-                    old_key: k[0],
-                    updated: k[1],
-                    log_num: v[0],
-                    rate_change: v[1],
-                })
-                .collect();
-            existing.sort_by_key(|e| e.old_key);
-            options.push(ScanOption::Detection(DetectionOptions {
-                label,
-                clutter_rate: values[0],
-                log_clutter: values[1],
-                new_key: keys[0],
-                new_track_rate: values[2],
-                new_rate: values[3],
-                new_log: values[4],
-                presence,
-                existing,
-            }));
+            });
         }
-        let (first_new, next_key, cluster_count) = self.counters;
+        let (first_new, next_key, cluster_count) = counters;
         Ok(Scan {
             settings,
             tracks,
@@ -1080,31 +1100,37 @@ mod tests {
         assert_eq!(empty, vec![h(0.0, &[], 0.0)]);
     }
 
-    #[test]
-    fn a_certain_update_replaces_the_object() {
-        let tracks = KeyMap::from_iter([(1, info(1.0)), (5, info(1.5)), (6, info(2.0))]);
-        let scan = Scan {
-            settings: settings(true),
-            tracks,
+    /// Object 1 alone and certain (cluster 0); 5 would be its update, 6 the new object.
+    fn one_object(mht: bool, options: Vec<ScanOption>) -> Scan {
+        Scan {
+            settings: settings(mht),
+            tracks: KeyMap::from_iter([(1, info(1.0)), (5, info(1.5)), (6, info(2.0))]),
             first_new: 5,
             next_key: 7,
             clusters: vec![(0, Cluster::certain(1, 1.0))],
             cluster_count: 1,
-            options: vec![ScanOption::Detection(DetectionOptions {
-                log_clutter: -20.0,
-                new_log: -21.0,
-                ..detection(
-                    6,
-                    vec![Existing {
-                        old_key: 1,
-                        updated: 5,
-                        log_num: 0.0,
-                        rate_change: 0.5,
-                    }],
-                )
-            })],
+            options,
+        }
+    }
+
+    /// Object 1 updated to version 5 with log numerator `log_num`.
+    fn update_of_one(log_num: f64) -> Vec<Existing> {
+        vec![Existing {
+            old_key: 1,
+            updated: 5,
+            log_num,
+            rate_change: 0.5,
+        }]
+    }
+
+    #[test]
+    fn a_certain_update_replaces_the_object() {
+        let option = DetectionOptions {
+            log_clutter: -20.0,
+            new_log: -21.0,
+            ..detection(6, update_of_one(0.0))
         };
-        let expanded = expand_scan(scan).unwrap();
+        let expanded = expand_scan(one_object(true, vec![ScanOption::Detection(option)])).unwrap();
         assert!(expanded.untouched.is_empty() && expanded.ops.is_empty());
         assert_eq!(expanded.clusters, vec![Cluster::certain(5, 1.5)]);
         assert_eq!(expanded.next_key, 7);
@@ -1112,25 +1138,8 @@ mod tests {
 
     #[test]
     fn an_uncertain_detection_starts_an_object_with_its_existence() {
-        let tracks = KeyMap::from_iter([(1, info(1.0)), (5, info(1.5)), (6, info(2.0))]);
-        let scan = Scan {
-            settings: settings(true),
-            tracks,
-            first_new: 5,
-            next_key: 7,
-            clusters: vec![(0, Cluster::certain(1, 1.0))],
-            cluster_count: 1,
-            options: vec![ScanOption::Detection(detection(
-                6,
-                vec![Existing {
-                    old_key: 1,
-                    updated: 5,
-                    log_num: -3.5,
-                    rate_change: 0.5,
-                }],
-            ))],
-        };
-        let expanded = expand_scan(scan).unwrap();
+        let option = ScanOption::Detection(detection(6, update_of_one(-3.5)));
+        let expanded = expand_scan(one_object(true, vec![option])).unwrap();
         let existence = (-4.0 - log_add(-3.0, -4.0)).exp();
         assert_eq!(
             expanded.ops,
@@ -1194,19 +1203,10 @@ mod tests {
 
     #[test]
     fn paper_keeps_one_global_cluster_and_pays_f_per_parent() {
-        let tracks = KeyMap::from_iter([(1, info(1.0)), (6, info(2.0))]);
         let mut option = detection(6, Vec::new());
         option.log_clutter = 1.0_f64.ln();
         option.new_log = 0.5_f64.ln();
-        let scan = Scan {
-            settings: settings(false),
-            tracks,
-            first_new: 5,
-            next_key: 7,
-            clusters: vec![(0, Cluster::certain(1, 1.0))],
-            cluster_count: 1,
-            options: vec![ScanOption::Detection(option)],
-        };
+        let scan = one_object(false, vec![ScanOption::Detection(option)]);
         let expanded = expand_scan(scan).unwrap();
         assert_eq!(expanded.clusters.len(), 1);
         let hypotheses = &expanded.clusters[0].hypotheses;
@@ -1217,18 +1217,12 @@ mod tests {
 
     #[test]
     fn a_version_not_given_is_an_error_not_a_panic() {
-        let scan = Scan {
-            settings: settings(true),
-            tracks: KeyMap::default(),
-            first_new: 5,
-            next_key: 7,
-            clusters: vec![(0, Cluster::certain(1, 1.0))],
-            cluster_count: 1,
-            options: vec![ScanOption::Settled {
-                old_key: 1,
-                updated: 5,
-            }],
+        let settled = ScanOption::Settled {
+            old_key: 1,
+            updated: 5,
         };
+        let mut scan = one_object(true, vec![settled]);
+        scan.tracks.clear();
         assert!(matches!(expand_scan(scan), Err(KernelError::Value(_))));
     }
 }

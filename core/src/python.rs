@@ -22,7 +22,9 @@ use pyo3::types::PyType;
 use crate::coverage;
 use crate::error::{expect_shape, KernelError, KernelResult};
 use crate::existence;
-use crate::expansion::{self, ExpandedArrays, ScanArrays};
+use crate::expansion::{
+    self, ClusterArrays, EntryArrays, ExpandedArrays, OptionArrays, ScanArrays, TrackArrays,
+};
 use crate::filters::batched;
 use crate::filters::factory::{ClassTables, TransitionPeriod};
 use crate::filters::small;
@@ -835,33 +837,37 @@ impl PyScanExpansion {
         presence: EntryArgs,
         existing: EntryArgs,
     ) -> PyResult<ExpandedResult> {
-        let (track_keys, track_rates, track_labels) = tracks;
-        let (cluster_ids, cluster_sizes, hypothesis_sizes, hypothesis_keys, log_weights, rates) =
-            clusters;
-        let (option_kinds, option_labels, option_keys, option_values) = options;
-        let (presence_counts, presence_keys, presence_values) = presence;
-        let (existing_counts, existing_keys, existing_values) = existing;
+        let (keys, rates, labels) = tracks;
+        let (ids, sizes, hypothesis_sizes, keys_held, log_weights, hypothesis_rates) = clusters;
+        let (kinds, option_labels, option_keys, values) = options;
+        let entries = |(counts, keys, values): EntryArgs| EntryArrays {
+            counts,
+            keys,
+            values,
+        };
         let arrays = ScanArrays {
             counters,
-            track_keys,
-            track_rates,
-            track_labels,
-            cluster_ids,
-            cluster_sizes,
-            hypothesis_sizes,
-            hypothesis_keys,
-            log_weights,
-            rates,
-            option_kinds,
-            option_labels,
-            option_keys,
-            option_values,
-            presence_counts,
-            presence_keys,
-            presence_values,
-            existing_counts,
-            existing_keys,
-            existing_values,
+            tracks: TrackArrays {
+                keys,
+                rates,
+                labels,
+            },
+            clusters: ClusterArrays {
+                ids,
+                sizes,
+                hypothesis_sizes,
+                keys: keys_held,
+                log_weights,
+                rates: hypothesis_rates,
+            },
+            options: OptionArrays {
+                kinds,
+                labels: option_labels,
+                keys: option_keys,
+                values,
+            },
+            presence: entries(presence),
+            existing: entries(existing),
         };
         let settings = self.settings;
         let out = run(py, "ScanExpansion.scan", move || {
