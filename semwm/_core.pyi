@@ -55,3 +55,33 @@ def gauss_hermite_rule() -> tuple[_F, _F]: ...
 def ndtr(values_: _F, /) -> _F: ...
 def range_coverage(positions: _F, sensor: _F, reach: float, spread: _F | None = None) -> _F: ...
 def hull_distance(points: _F, corners: _F, /) -> _F | None: ...
+
+# the expansion of one scan (core/src/expansion.rs, core/src/hypotheses.rs)
+class ScanExpansion:
+    def __init__(
+        self, ratio: float, max_hypotheses: int, association_model: str, log_label_error: float
+    ) -> None: ...
+    def scan(
+        self,
+        counters: tuple[int, int, int],
+        tracks: tuple[list[int], list[float], list[str | None]],
+        clusters: tuple[list[int], list[int], list[int], list[int], list[float], list[float]],
+        options: tuple[list[int], list[str | None], list[int], list[float]],
+        presence: tuple[list[int], list[int], list[float]],
+        existing: tuple[list[int], list[int], list[float]],
+    ) -> tuple[
+        list[int],
+        tuple[list[int], list[int], list[int]],
+        tuple[list[int], list[int], list[float], list[float]],
+        tuple[list[int], list[int], list[int], list[float]],
+        int,
+    ]: ...
+
+def merge_prune(
+    sizes: list[int],
+    keys: list[int],
+    log_weights: list[float],
+    rates: list[float],
+    ratio: float,
+    max_hypotheses: int,
+) -> tuple[list[int], list[int], list[float], list[float]]: ...

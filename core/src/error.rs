@@ -15,6 +15,10 @@ pub enum KernelError {
     NotPositiveDefinite(String),
     /// A matrix to solve with is singular (raised as `numpy.linalg.LinAlgError`).
     Singular(String),
+    /// A value the computation cannot take, where the Python engine raises `ValueError`
+    /// (every hypothesis with zero probability, the logarithm of a rate that is not
+    /// positive): raised as `ValueError` with the same message.
+    Value(String),
 }
 
 impl fmt::Display for KernelError {
@@ -22,7 +26,8 @@ impl fmt::Display for KernelError {
         match self {
             KernelError::Shape(message)
             | KernelError::NotPositiveDefinite(message)
-            | KernelError::Singular(message) => f.write_str(message),
+            | KernelError::Singular(message)
+            | KernelError::Value(message) => f.write_str(message),
         }
     }
 }

@@ -22,14 +22,18 @@ use pyo3::types::PyType;
 use crate::coverage;
 use crate::error::{expect_shape, KernelError, KernelResult};
 use crate::existence;
+use crate::expansion::{
+    self, ClusterArrays, EntryArrays, ExpandedArrays, OptionArrays, ScanArrays, TrackArrays,
+};
 use crate::filters::batched;
 use crate::filters::factory::{ClassTables, TransitionPeriod};
 use crate::filters::small;
+use crate::hypotheses;
 
 /// A kernel error as the Python exception the Python engine would raise.
 fn to_py_err(py: Python<'_>, error: KernelError) -> PyErr {
     match error {
-        KernelError::Shape(message) => PyValueError::new_err(message),
+        KernelError::Shape(message) | KernelError::Value(message) => PyValueError::new_err(message),
         KernelError::NotPositiveDefinite(message) | KernelError::Singular(message) => {
             match py
                 .import("numpy.linalg")
@@ -751,6 +755,191 @@ fn hull_distance<'py>(
     result.map(|r| to_numpy(py, count, r)).transpose()
 }
 
+// ---------------------------------------------------------------- the expansion of a scan
+
+/// The hypothesis algebra of one scan (`core/src/expansion.rs`) for one filter's
+/// settings: `MultipleHypothesisFilter`'s eq. (3) ratio and n_hyp,max, its association
+/// model and log label error rate, handed over once per filter.
+#[pyclass(frozen, name = "ScanExpansion", module = "semwm._core")]
+struct PyScanExpansion {
+    settings: expansion::Settings,
+}
+
+/// Keys, values and labels of the versions (`ScanArrays`' first three).
+type TrackArgs = (Vec<u64>, Vec<f64>, Vec<Option<String>>);
+/// The given clusters: ids, sizes, hypothesis sizes, keys, log weights, rates.
+type ClusterArgs = (
+    Vec<usize>,
+    Vec<usize>,
+    Vec<usize>,
+    Vec<u64>,
+    Vec<f64>,
+    Vec<f64>,
+);
+/// The options: kinds, labels, keys, values.
+type OptionArgs = (Vec<u8>, Vec<Option<String>>, Vec<u64>, Vec<f64>);
+/// Counts, keys and values of the options' presence or existing entries.
+type EntryArgs = (Vec<usize>, Vec<u64>, Vec<f64>);
+/// The result: untouched clusters; new clusters (sizes, key sizes, keys); their
+/// hypotheses (sizes, keys, log weights, rates); versions made (kinds, keys, sources,
+/// existence); the next key.
+type ExpandedResult = (
+    Vec<usize>,
+    (Vec<usize>, Vec<usize>, Vec<u64>),
+    (Vec<usize>, Vec<u64>, Vec<f64>, Vec<f64>),
+    (Vec<u8>, Vec<u64>, Vec<u64>, Vec<f64>),
+    u64,
+);
+
+#[pymethods]
+impl PyScanExpansion {
+    #[new]
+    fn new(
+        ratio: f64,
+        max_hypotheses: usize,
+        association_model: &str,
+        log_label_error: f64,
+    ) -> PyResult<Self> {
+        let mht = match association_model {
+            "mht" => true,
+            "paper" => false,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "association_model: expected 'mht' or 'paper', got {other:?}"
+                )))
+            }
+        };
+        if max_hypotheses == 0 {
+            return Err(PyValueError::new_err(
+                "max_hypotheses: expected at least 1, got 0",
+            ));
+        }
+        Ok(PyScanExpansion {
+            settings: expansion::Settings {
+                ratio,
+                max_hypotheses,
+                mht,
+                log_label_error,
+            },
+        })
+    }
+
+    /// The scan's clusters from its options (`semwm.mhf.rust_expansion.expand_scan`
+    /// packs the arguments, `ScanArrays` names them).
+    #[allow(clippy::too_many_arguments)]
+    fn scan(
+        &self,
+        py: Python<'_>,
+        counters: (u64, u64, usize),
+        tracks: TrackArgs,
+        clusters: ClusterArgs,
+        options: OptionArgs,
+        presence: EntryArgs,
+        existing: EntryArgs,
+    ) -> PyResult<ExpandedResult> {
+        let (keys, rates, labels) = tracks;
+        let (ids, sizes, hypothesis_sizes, keys_held, log_weights, hypothesis_rates) = clusters;
+        let (kinds, option_labels, option_keys, values) = options;
+        let entries = |(counts, keys, values): EntryArgs| EntryArrays {
+            counts,
+            keys,
+            values,
+        };
+        let arrays = ScanArrays {
+            counters,
+            tracks: TrackArrays {
+                keys,
+                rates,
+                labels,
+            },
+            clusters: ClusterArrays {
+                ids,
+                sizes,
+                hypothesis_sizes,
+                keys: keys_held,
+                log_weights,
+                rates: hypothesis_rates,
+            },
+            options: OptionArrays {
+                kinds,
+                labels: option_labels,
+                keys: option_keys,
+                values,
+            },
+            presence: entries(presence),
+            existing: entries(existing),
+        };
+        let settings = self.settings;
+        let out = run(py, "ScanExpansion.scan", move || {
+            let scan = arrays.into_scan(settings)?;
+            expansion::expand_scan(scan).map(ExpandedArrays::from)
+        })?;
+        Ok((
+            out.untouched,
+            (out.cluster_sizes, out.cluster_key_sizes, out.cluster_keys),
+            (
+                out.hypothesis_sizes,
+                out.hypothesis_keys,
+                out.log_weights,
+                out.rates,
+            ),
+            (out.op_kinds, out.op_keys, out.op_sources, out.op_existence),
+            out.next_key,
+        ))
+    }
+}
+
+/// `merge` then `prune` (`semwm.mhf.prune`) of children given as arrays: per child its
+/// number of keys, the keys, log weights and rates. Returns the kept hypotheses in the
+/// same layout, most probable first.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn merge_prune(
+    py: Python<'_>,
+    sizes: Vec<usize>,
+    keys: Vec<u64>,
+    log_weights: Vec<f64>,
+    rates: Vec<f64>,
+    ratio: f64,
+    max_hypotheses: usize,
+) -> PyResult<(Vec<usize>, Vec<u64>, Vec<f64>, Vec<f64>)> {
+    run(py, "merge_prune", move || {
+        let count = sizes.len();
+        for (name, got) in [("log_weights", log_weights.len()), ("rates", rates.len())] {
+            if got != count {
+                return Err(KernelError::Shape(format!(
+                    "{name}: expected {count} values (one per child), got {got}"
+                )));
+            }
+        }
+        let total: usize = sizes.iter().sum();
+        if total != keys.len() {
+            return Err(KernelError::Shape(format!(
+                "keys: expected {total} values (the sizes' sum), got {}",
+                keys.len()
+            )));
+        }
+        let mut merged = hypotheses::Merged::new();
+        let mut at = 0;
+        for i in 0..count {
+            let mut child = keys[at..at + sizes[i]].to_vec();
+            at += sizes[i];
+            child.sort_unstable();
+            child.dedup();
+            merged.add(child, log_weights[i], rates[i]);
+        }
+        let kept = hypotheses::prune(merged, ratio, max_hypotheses)?;
+        let mut out = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for h in kept {
+            out.0.push(h.keys.len());
+            out.1.extend_from_slice(&h.keys);
+            out.2.push(h.log_weight);
+            out.3.push(h.rate);
+        }
+        Ok(out)
+    })
+}
+
 /// `semwm._core`: the Rust engine's kernels (see docs/engines.md).
 #[pymodule]
 #[pyo3(name = "_core")]
@@ -770,5 +959,7 @@ fn semwm_core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_function(wrap_pyfunction!(ndtr, module)?)?;
     module.add_function(wrap_pyfunction!(range_coverage, module)?)?;
     module.add_function(wrap_pyfunction!(hull_distance, module)?)?;
+    module.add_class::<PyScanExpansion>()?;
+    module.add_function(wrap_pyfunction!(merge_prune, module)?)?;
     Ok(())
 }

@@ -43,6 +43,7 @@ from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted, predict_tracks
 from semwm.mhf.prune import log_add, merge, prune
 from semwm.mhf.rates import MIN_EVIDENCE_SCANS, ObservedRates, ScanCoverage
+from semwm.mhf.rust_expansion import ScanExpander
 from semwm.mhf.similar import merge_similar
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
 
@@ -107,13 +108,24 @@ class _TrackTable:
         objects with one label gets a new unique label; its id serves as that label)."""
         done = self._unlabeled.get(key)
         if done is None:
-            copy = self.tracks[key].relabeled(self.new_key(), None)
-            origin = self.origin_of(key)
-            self.add(copy, origin, key in self.fresh, self.existence[key])
-            done = self._unlabeled[key] = copy.key
-            if key not in self.fresh and origin == key:
-                self.copies[key] = copy.key
+            done = self.copy_unlabeled(key, self.new_key())
         return done
+
+    def copy_unlabeled(self, key: int, copy_key: int) -> int:
+        """Makes version ``copy_key`` of ``key`` without its label (:meth:`unlabeled`)."""
+        copy = self.tracks[key].relabeled(copy_key, None)
+        origin = self.origin_of(key)
+        self.add(copy, origin, key in self.fresh, self.existence[key])
+        self._unlabeled[key] = copy_key
+        if key not in self.fresh and origin == key:
+            self.copies[key] = copy_key
+        return copy_key
+
+    def add_birth(self, new_track: Track, key: int, existence: float) -> None:
+        """Adds version ``key`` of the new object ``new_track`` (itself for its first
+        version) with ``existence`` (:meth:`MultipleHypothesisFilter._birth`)."""
+        born = new_track if key == new_track.key else new_track.relabeled(key, new_track.label)
+        self.add(born, fresh=True, existence=existence)
 
 
 class MultipleHypothesisFilter:
@@ -137,6 +149,15 @@ class MultipleHypothesisFilter:
         self.missed_detections = self.mht and world.missed_detection_term
         self.observed_rates = self.mht and world.observed_detection_rates
         self.merge_distance = world.merge_distance if self.mht else 0.0
+        # the Rust engine's expansion of a scan (step 5), else None: the Python methods
+        associator = self.associator
+        self._rust_expansion = (
+            ScanExpander(
+                self.ratio, self.max_hypotheses, associator.model, associator.log_label_error
+            )
+            if self.kernels.engine == "rust"
+            else None
+        )
         self.region = world.region
         self._terms: dict[str, tuple[FloatArray, FloatArray, float]] = {}
         self._last_terms: (
@@ -408,8 +429,32 @@ class MultipleHypothesisFilter:
             )
             table.existence.update(r_view)
             clusters = self.undetected(clusters, log_q_view, table.tracks)
+        final = self._expand_scan(clusters, options, table)
+        if self.merge_distance > 0.0:
+            untouched = {id(c) for c in clusters}
+            final = self._merge_similar(final, table, untouched)
+        referenced: set[int] = set().union(*(c.keys for c in final))
+        tracks = {k: table.tracks[k] for k in referenced}
+        kept = {k: table.existence.get(k, 1.0) for k in referenced}
+        observed = state.observed
+        if (self.observed_rates or self.missed_detections) and measurements:
+            observed = self._observe(observed, state.tracks, options, final, table, time)
+        return MHFState(final, tracks, time, table.next_key, kept, observed)
+
+    def _expand_scan(
+        self,
+        clusters: Sequence[Cluster],
+        options: Sequence[DetectionOptions | SettledUpdate],
+        table: _TrackTable,
+    ) -> tuple[Cluster, ...]:
+        """Step 5: the scan's clusters, detection by detection: the clusters a detection
+        touches joined (:func:`_product`), expanded (:meth:`_expand`) and split
+        (:meth:`_split`). With the Rust engine, the rest of the scan from its first
+        detection that needs them is computed in one call (:mod:`semwm.mhf.rust_expansion`,
+        ``core/src/expansion.rs``); settled and certain updates before it are bookkeeping
+        (no hypothesis is built) and stay here."""
         book = _ClusterBook(clusters)
-        for option in options:
+        for position, option in enumerate(options):
             if isinstance(option, SettledUpdate):  # what _certain_update would give
                 table.add(option.updated, origin=option.old_key, fresh=True)
                 book.take(book.owners({option.old_key}))
@@ -431,20 +476,13 @@ class MultipleHypothesisFilter:
                 book.take(touched)
                 book.put((certain,))
                 continue
+            if self._rust_expansion is not None:  # this detection and the rest: in Rust
+                self._rust_expansion.expand(book, options, position, table)
+                break
             merged = _product(book.take(touched), self.ratio, self.max_hypotheses)
             expanded = self._expand(merged, option, table)
             book.put(self._split(expanded, table.tracks))
-        final = book.clusters()
-        if self.merge_distance > 0.0:
-            untouched = {id(c) for c in clusters}
-            final = self._merge_similar(final, table, untouched)
-        referenced: set[int] = set().union(*(c.keys for c in final))
-        tracks = {k: table.tracks[k] for k in referenced}
-        kept = {k: table.existence.get(k, 1.0) for k in referenced}
-        observed = state.observed
-        if (self.observed_rates or self.missed_detections) and measurements:
-            observed = self._observe(observed, state.tracks, options, final, table, time)
-        return MHFState(final, tracks, time, table.next_key, kept, observed)
+        return book.clusters()
 
     def _view_detection(self, observed: ObservedRates, view: SensorView) -> dict[str, float]:
         """Per class, the per-scan detection probability the view's stream is observed to
@@ -630,8 +668,8 @@ class MultipleHypothesisFilter:
         self, hypotheses: Sequence[Hypothesis], tracks: Mapping[int, Track]
     ) -> list[Cluster]:
         """Split a cluster: objects held (in the same version) by every hypothesis are
-        certain and become clusters of their own; a cluster whose only hypothesis is
-        empty carries nothing and is dropped."""
+        certain and become clusters of their own (in key order); a cluster whose only
+        hypothesis is empty carries nothing and is dropped."""
         if not self.factorised:
             if len(hypotheses) == 1 and not hypotheses[0].tracks:
                 return []
@@ -639,12 +677,12 @@ class MultipleHypothesisFilter:
         common = frozenset.intersection(*(h.tracks for h in hypotheses))
         result = [
             Cluster((Hypothesis(0.0, frozenset({k}), tracks[k].rate),), frozenset({k}))
-            for k in common
+            for k in sorted(common)
         ]
         if len(hypotheses) > 1 and not common:  # nothing to split off
             result.append(Cluster.of(tuple(hypotheses)))
         elif len(hypotheses) > 1:
-            common_rate = sum(tracks[k].rate for k in common)
+            common_rate = sum(tracks[k].rate for k in sorted(common))
             rest = prune(
                 merge((h.tracks - common, h.log_weight, h.rate - common_rate) for h in hypotheses),
                 0.0,
@@ -658,7 +696,9 @@ class MultipleHypothesisFilter:
         self, hypotheses: Sequence[Hypothesis], option: DetectionOptions, table: _TrackTable
     ) -> tuple[Hypothesis, ...]:
         """Children of every hypothesis for one detection (eq. 1 with eqs. 4-8), merged and
-        pruned."""
+        pruned. A hypothesis's objects are visited in key order, so that the children's
+        order (which orders hypotheses of equal weight) and the keys of label copies do
+        not depend on how Python hashes a set."""
         children: list[tuple[frozenset[int], float, float]] = []
         new_key = option.new_track.key
         new_rate = option.new_track.rate
@@ -685,7 +725,7 @@ class MultipleHypothesisFilter:
             tracks = h.tracks
             birth_rate, birth_log = option.new_rate, option.new_log
             if presence:
-                for k in presence_keys & tracks:
+                for k in sorted(presence_keys & tracks):
                     rate, log_num = presence[k]
                     if log_num > birth_log:
                         birth_rate, birth_log = rate, log_num
@@ -694,7 +734,9 @@ class MultipleHypothesisFilter:
                 # paper 002 eqs. (5)-(7): F sums the frequencies open to this detection;
                 # objects that took a detection of this scan cannot take another
                 taken = tracks & fresh
-                open_rate = h.rate - sum(table.tracks[k].rate for k in taken) if taken else h.rate
+                open_rate = (
+                    h.rate - sum(table.tracks[k].rate for k in sorted(taken)) if taken else h.rate
+                )
                 log_norm -= math.log(option.clutter_rate + birth_rate + open_rate)
             labelled = label is not None and not holders.isdisjoint(tracks)
             if self.mht:
@@ -725,7 +767,7 @@ class MultipleHypothesisFilter:
                     if labelled:
                         child = _give_label(child, new_key, holders, table)
                     children.append((child, log_norm + birth_log, h.rate + new_rate))
-            for k in existing_keys & tracks:
+            for k in sorted(existing_keys & tracks):
                 updated, log_num, rate_change = existing[k]
                 if self.mht and labelled and k not in holders and table.tracks[k].label is None:
                     # an unlabelled object takes the label from its holder: another
@@ -739,7 +781,7 @@ class MultipleHypothesisFilter:
                     child = _give_label(child, updated.key, holders, table)
                 children.append((child, log_norm + log_num, h.rate + rate_change))
             if copies:
-                for k in copy_keys & tracks:
+                for k in sorted(copy_keys & tracks):
                     updated, log_num, rate_change = existing[copies[k]]
                     holder = updated.key if label is not None else table.unlabeled(updated.key)
                     child = (tracks - {k}) | {holder}
@@ -837,6 +879,11 @@ class _ClusterBook:
     def ids(self) -> set[int]:
         return set(self._clusters)
 
+    @property
+    def next_id(self) -> int:
+        """The id the next cluster put gets (every id so far is below it)."""
+        return self._next
+
     def get(self, cluster_id: int) -> Cluster:
         return self._clusters[cluster_id]
 
@@ -906,11 +953,11 @@ def _give_label(
 ) -> frozenset[int]:
     """Paper 000 III-B: the object that took the labeled detection holds the label; any
     other object of the hypothesis with that label (``holders``: every version holding
-    it) gives it up."""
+    it) gives it up (in key order: the order their copies get keys)."""
     others = (holders & child) - {holder}
     if not others:
         return child
-    return (child - others) | {table.unlabeled(k) for k in others}
+    return (child - others) | {table.unlabeled(k) for k in sorted(others)}
 
 
 def _without(

@@ -84,19 +84,25 @@ def _assert_same_frame(python: WorldModel, rust: WorldModel, frame: int) -> int:
     return len(expected)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-@pytest.mark.parametrize(("name", "sizes"), SCENARIOS, ids=[s[0] for s in SCENARIOS])
-def test_same_world_every_frame(name: str, sizes: dict[str, float], seed: int) -> None:
-    scenario = make_scenario(name, seed, **sizes)
-    knowledge = _knowledge(scenario.knowledge_file)
+def _same_worlds(knowledge: Knowledge, detections: Any) -> tuple[int, int, WorldModel]:
+    """Both engines through the scans of ``detections``, every frame compared: the
+    number of frames, of objects over them, and the Rust engine's world model."""
     python = WorldModel(knowledge, engine="python")
     rust = WorldModel(knowledge, engine="rust")
     frames = objects = 0
-    for scan in scans(scenario.detections):
+    for scan in scans(detections):
         python.ingest(scan)
         rust.ingest(scan)
         objects += _assert_same_frame(python, rust, frames)
         frames += 1
+    return frames, objects, rust
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize(("name", "sizes"), SCENARIOS, ids=[s[0] for s in SCENARIOS])
+def test_same_world_every_frame(name: str, sizes: dict[str, float], seed: int) -> None:
+    scenario = make_scenario(name, seed, **sizes)
+    frames, objects, rust = _same_worlds(_knowledge(scenario.knowledge_file), scenario.detections)
     assert frames > 10 and objects > frames  # a real run, not an empty one
     assert math.isfinite(rust.latest_time or 0.0)
 
@@ -203,12 +209,20 @@ def test_same_world_of_a_static_grid(seed: int) -> None:
     knowledge = knowledge.model_copy(
         update={"world": knowledge.world.model_copy(update={"region": region})}
     )
-    python = WorldModel(knowledge, engine="python")
-    rust = WorldModel(knowledge, engine="rust")
-    frames = objects = 0
-    for scan in scans(scenario.detections):
-        python.ingest(scan)
-        rust.ingest(scan)
-        objects += _assert_same_frame(python, rust, frames)
-        frames += 1
+    frames, objects, _ = _same_worlds(knowledge, scenario.detections)
     assert frames > 20 and objects > 20 * frames
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_same_world_under_the_paper_model(seed: int) -> None:
+    """robocup (2 s: robots reporting their own labelled positions) under the ``paper``
+    association model (paper 002 eqs. 5-8: one global cluster, F per parent): the
+    expansion's other model, with labels, frame by frame. (The shipped knowledge under
+    ``paper`` keeps sim1's and sim2's worlds empty: tests/sim/test_paper_claims.py.)"""
+    scenario = make_scenario("robocup", seed, duration=2.0)
+    knowledge = _knowledge(scenario.knowledge_file)
+    world = knowledge.world.model_copy(update={"association_model": "paper"})
+    knowledge = knowledge.model_copy(update={"world": world})
+    frames, objects, rust = _same_worlds(knowledge, scenario.detections)
+    assert frames > 100 and objects > 3 * frames
+    assert rust.hypothesis_count > 1  # hypotheses, not one certain world

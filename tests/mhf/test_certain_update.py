@@ -15,6 +15,14 @@ from semwm.world import WorldModel
 from .worlds import scenario_worlds as _worlds
 
 
+@pytest.fixture(autouse=True)
+def _python_engine(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests patch the Python engine's methods, so they run the Python engine
+    whatever ``SEMWM_ENGINE`` says; the Rust engine's expansion (core/src/expansion.rs)
+    takes the same shortcut and is held to the Python engine by tests/engines/."""
+    monkeypatch.setenv("SEMWM_ENGINE", "python")
+
+
 @pytest.mark.parametrize(
     ("name", "seed", "sizes"),
     [("sim1", 5, {}), ("robocup", 9, {"duration": 1.0}), ("grid", 0, {"duration": 1.0})],
@@ -68,7 +76,7 @@ def _two_cups_world(settling: bool, monkeypatch: pytest.MonkeyPatch) -> list[lis
     cup (the second is a near duplicate), and scans where each cup has one."""
     if not settling:
         monkeypatch.setattr(MultipleHypothesisFilter, "_settleable", lambda *a: None)
-    world = WorldModel(load_knowledge(shipped_knowledge_path("sim1.yaml")))
+    world = WorldModel(load_knowledge(shipped_knowledge_path("sim1.yaml")), engine="python")
     frames: list[list[object]] = []
     for k in range(30):
         t = 0.1 * k

@@ -16,6 +16,14 @@ from .kb import knowledge, static_class
 REGION = ((-1.0, 4.0), (-1.0, 4.0))
 
 
+@pytest.fixture(autouse=True)
+def _python_engine(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests patch the Python engine's methods, so they run the Python engine
+    whatever ``SEMWM_ENGINE`` says; the Rust engine's expansion (core/src/expansion.rs)
+    takes the same shortcut and is held to the Python engine by tests/engines/."""
+    monkeypatch.setenv("SEMWM_ENGINE", "python")
+
+
 def _classes() -> list:
     return [
         static_class("Can", f_existing=2.0, f_new=0.3, r=0.04),
