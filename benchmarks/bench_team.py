@@ -11,9 +11,9 @@ RoboCup (paper 000: 5 peers, 5 opponents, 30 Hz) played through a simulated team
 * ``2-level <strategy> ideal``: local models report to a global one every 0.1 s
   and between periods when a new object or the send-on-delta gate (0.95) calls
   for it, for each report strategy (:mod:`semwm.team`); ``2-level updated sync /
-  no sync``; ``2-level updated ideal, no drift gate`` (between periods only for a
-  new object) and ``, every scan`` (a report after every scan, no gate) bracket
-  the gate;
+  no sync``, ``2-level detections sync``; ``2-level updated ideal, no drift gate``
+  (between periods only for a new object) and ``, every scan`` (a report after
+  every scan, no gate) bracket the gate;
 * ``... (hold)``: the same with the old sorting-buffer receiver, which releases a
   message once its stamp is ``hold`` s old and so rewards stamps that fall exactly
   on the evaluation times (ideal clocks on the scenario's time grid); the others
@@ -28,6 +28,7 @@ level, messages and bytes between the levels, detections dropped as late, the
 largest clock estimate error.
 
     python benchmarks/bench_team.py [--seeds 0 1 2 3 4 5 6 7] [--duration 2] [--update-results]
+        [--only CONFIGURATION ...] [--name team]
 
 (3 seeds of 2 s separate configurations only to about 5 %: the default is 8.)
 
@@ -64,22 +65,33 @@ CONFIGS: list[tuple[str, int, Network, str, dict[str, Any]]] = [
     ("2-level updated ideal", 2, Network(0.0, LATENCY), "updated", {}),
     ("2-level updated ideal, no drift gate", 2, Network(0.0, LATENCY), "updated", NO_DRIFT),
     ("2-level updated ideal, every scan", 2, Network(0.0, LATENCY), "updated", EVERY_SCAN),
+    ("2-level detections ideal", 2, Network(0.0, LATENCY), "detections", {}),
     ("2-level ci ideal", 2, Network(0.0, LATENCY), "ci", {}),
     ("2-level information ideal", 2, Network(0.0, LATENCY), "information", {}),
     ("2-level updated sync", 2, Network(OFFSET, LATENCY, sync=True), "updated", {}),
+    ("2-level detections sync", 2, Network(OFFSET, LATENCY, sync=True), "detections", {}),
     ("2-level updated no sync", 2, Network(OFFSET, LATENCY, sync=False), "updated", {}),
     ("flat ideal (hold)", 1, Network(0.0, LATENCY, receiver="hold"), "updated", {}),
     ("flat sync (hold)", 1, Network(OFFSET, LATENCY, sync=True, receiver="hold"), "updated", {}),
     ("2-level updated ideal (hold)", 2, Network(0.0, LATENCY, receiver="hold"), "updated", {}),
     ("2-level updated sync (hold)", 2, Network(OFFSET, LATENCY, sync=True, receiver="hold"),
      "updated", {}),
+    ("2-level detections ideal (hold)", 2, Network(0.0, LATENCY, receiver="hold"), "detections",
+     {}),
+    ("2-level detections sync (hold)", 2, Network(OFFSET, LATENCY, sync=True, receiver="hold"),
+     "detections", {}),
 ]  # fmt: skip
 
 
-def run(seeds: list[int], duration: float) -> dict[str, Any]:
+def run(seeds: list[int], duration: float, only: list[str] | None = None) -> dict[str, Any]:
     knowledge = load_knowledge(shipped_knowledge_path("robocup.yaml"))
     rows = []
+    unknown = sorted(set(only or ()) - {c[0] for c in CONFIGS})
+    if unknown:
+        raise SystemExit(f"unknown configuration(s) {unknown}; known: {[c[0] for c in CONFIGS]}")
     for name, levels, network, strategy, options in CONFIGS:
+        if only is not None and name not in only:
+            continue
         runs: list[dict[str, Any]] = []
         for seed in seeds:
             scenario = make_scenario("robocup", seed, duration=duration)
@@ -206,11 +218,15 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=2.0)
     parser.add_argument("--update-results", action="store_true",
                         help="write benchmarks/results/ instead of benchmarks/out/")  # fmt: skip
+    parser.add_argument("--only", nargs="+", metavar="CONFIGURATION",
+                        help="only these configurations (names as in the table)")  # fmt: skip
+    parser.add_argument("--name", default="team",
+                        help="results file name (default: team)")  # fmt: skip
     args = parser.parse_args()
-    doc = run(args.seeds, args.duration)
+    doc = run(args.seeds, args.duration, args.only)
     write_results(
         HERE / "results",
-        "team",
+        args.name,
         doc,
         markdown(doc),
         quick=False,
