@@ -22,6 +22,16 @@ estimate holds the information sent before. What a report carries
 * ``ci``: ``updated`` with the covariance doubled: the Kalman update with ``2 P``
   is the local half of covariance intersection with weight 1/2, a conservative
   fusion for unknown correlation;
+* ``detections``: only objects updated by a local detection since the
+  last report, each as the detections the local model gave it since then, combined
+  (:func:`combine_detections`): the information-weighted mean of their positions, each
+  moved to the report time by the object's local velocity, with covariance
+  ``(sum_i R_i^-1)^-1``. Those detections were in no earlier report, so the global
+  model counts nothing twice (no factor on the covariance) and, as flat, filters
+  independent measurements once, not a filtered estimate again (issue 28: the global
+  filter's gain on a re-sent estimate is about 0.4, so it lagged the robot's own
+  estimate). An object updated without a detection found for it goes as ``updated``
+  sends it;
 * ``information``: only the information the object gained since it was last sent
   (equivalent measurement, information form): ``I = P⁻¹ - P_s⁻¹`` and
   ``z = I⁻¹ (P⁻¹ x - P_s⁻¹ x_s)``, with ``x_s`` the sent position moved on by the
@@ -58,10 +68,11 @@ from enum import StrEnum
 import numpy as np
 from scipy.special import chdtri
 
+from semwm.detection import Detection
 from semwm.filters.factory import FilterFactory
 from semwm.knowledge.model import DetectorSpec, Knowledge
 from semwm.knowledge.resolve import resolve
-from semwm.validation import DetectionInput
+from semwm.validation import DetectionInput, as_batch, parse
 from semwm.world import IngestResult, WorldModel
 from semwm.world_types import WorldObject, WorldState
 
@@ -79,6 +90,7 @@ class Strategy(StrEnum):
 
     ALL = "all"
     UPDATED = "updated"
+    DETECTIONS = "detections"
     CI = "ci"
     INFORMATION = "information"
 
@@ -129,6 +141,16 @@ class _Replica:
 
 
 @dataclass(frozen=True)
+class Taken:
+    """A detection the local model gave an object: its time (s), position ``z`` ``(d,)``
+    and noise ``R`` ``(d, d)``."""
+
+    time: float
+    z: np.ndarray
+    R: np.ndarray
+
+
+@dataclass(frozen=True)
 class _Sent:
     time: float
     position: np.ndarray
@@ -170,9 +192,58 @@ class LocalModel:
         self.model = WorldModel(knowledge, reorder_window=reorder_window)
         self._filters = FilterFactory(knowledge)
         self._sent: dict[int, _Sent] = {}
+        self._taken: dict[int, list[Taken]] = {}
 
     def ingest(self, detections: DetectionInput | Iterable[DetectionInput]) -> IngestResult:
-        return self.model.ingest(detections)
+        """The robot's own detections into its local model; with ``detections``, also
+        noted per object they updated, for the next report (:meth:`_take`)."""
+        batch = as_batch(detections)
+        result = self.model.ingest(batch)
+        if self.strategy is Strategy.DETECTIONS and batch:
+            self._take(parse(batch))
+        return result
+
+    def _take(self, detections: list[Detection]) -> None:
+        """Note which object each detection of the batch's latest scan updated.
+
+        The local MHF does not say which detection its most probable hypothesis gave an
+        object, so each object updated at the scan's time takes the scan's detection
+        nearest its updated estimate (Mahalanobis distance with ``P + R``; a labelled
+        detection the object holding its label), each detection at most once, nearest
+        pairs first. Detections of earlier times in the same batch are not noted (the
+        object's estimate then is gone): such objects go as ``updated`` sends them."""
+        at = max(d.time for d in detections)
+        scan = [d for d in detections if d.time == at]
+        default = self.model.knowledge.default_detector
+        noise = [
+            np.asarray(d.covariance, dtype=float)
+            if d.covariance is not None
+            else self._filters.measurement_noise(d.cls, d.detector or default)
+            for d in scan
+        ]
+        taxonomy = self.model.taxonomy
+        pairs: list[tuple[bool, float, int, int]] = []
+        for obj in self.model.world().objects:
+            if obj.last_seen != at:
+                continue
+            x, P = np.asarray(obj.position), np.asarray(obj.covariance)
+            for k, (det, R) in enumerate(zip(scan, noise, strict=True)):
+                if not taxonomy.compatible(obj.cls, det.cls):
+                    continue
+                delta = np.asarray(det.position) - x
+                d2 = float(delta @ np.linalg.solve(P + R, delta))
+                pairs.append((det.label is None or det.label != obj.label, d2, obj.id, k))
+        pairs.sort()
+        objects: set[int] = set()
+        used: set[int] = set()
+        for _, _, object_id, k in pairs:
+            if object_id in objects or k in used:
+                continue
+            objects.add(object_id)
+            used.add(k)
+            z = np.asarray(scan[k].position, dtype=float)
+            # a new list, not appended in place: a saved copy of the dict stays as it was
+            self._taken[object_id] = [*self._taken.get(object_id, ()), Taken(at, z, noise[k])]
 
     def world(self, time: float | None = None) -> WorldState:
         return self.model.world(time=time)
@@ -180,6 +251,7 @@ class LocalModel:
     def reset(self) -> None:
         self.model.reset()
         self._sent = {}
+        self._taken = {}
 
     def due(
         self,
@@ -255,6 +327,7 @@ class LocalModel:
                 self._replica(obj.cls, sent.replica if sent is not None else None, item, at),
             )
         self._sent = {k: v for k, v in self._sent.items() if k in alive}
+        self._taken = {k: v for k, v in self._taken.items() if k in alive}
         if not detections:
             return None
         return Report(self.robot, at, tuple(detections), tuple(ids))
@@ -293,9 +366,12 @@ class LocalModel:
             return None  # not updated since it was last sent
         position = np.asarray(obj.position)
         covariance = np.asarray(obj.covariance)
-        if strategy is Strategy.CI:
+        taken = self._taken.pop(obj.id, None) if strategy is Strategy.DETECTIONS else None
+        if taken:
+            position, covariance = combine_detections(taken, obj.velocity, at)
+        elif strategy is Strategy.CI:
             covariance = 2.0 * covariance
-        elif strategy is Strategy.UPDATED and obj.label is None:
+        elif strategy in (Strategy.UPDATED, Strategy.DETECTIONS) and obj.label is None:
             covariance = TRACKED_FACTOR * covariance
         elif strategy is Strategy.INFORMATION and sent is not None:
             gained = _new_information(position, covariance, sent, at)
@@ -314,6 +390,28 @@ class LocalModel:
         if obj.label is not None:
             item["label"] = obj.label
         return item
+
+
+def combine_detections(
+    taken: Sequence[Taken], velocity: Sequence[float] | None, at: float
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""One detection at ``at`` from the detections ``taken`` of one object: each position
+    moved to ``at`` by the object's ``velocity`` (m/s; ``None``: not moved), combined
+    by their information (the least-squares position, independent noises):
+
+    .. math:: C = \Big(\sum_i R_i^{-1}\Big)^{-1}, \qquad
+       z = C \sum_i R_i^{-1} \big(z_i + v\,(t - t_i)\big)
+
+    Returns ``z`` ``(d,)`` and ``C`` ``(d, d)``."""
+    v = np.zeros_like(taken[0].z) if velocity is None else np.asarray(velocity, dtype=float)
+    information = np.zeros((len(v), len(v)))
+    weighted = np.zeros(len(v))
+    for t in taken:
+        R_inv = np.linalg.inv(t.R)
+        information += R_inv
+        weighted += R_inv @ (t.z + v * (at - t.time))
+    C = np.linalg.inv(information)
+    return C @ weighted, (C + C.T) / 2.0
 
 
 def _ahead(obj: WorldObject, horizon: float) -> WorldObject:

@@ -65,7 +65,7 @@ def add_team_options(parser: argparse.ArgumentParser) -> None:
     team.add_argument(
         "--strategy",
         default="updated",
-        choices=("all", "updated", "ci", "information"),
+        choices=("all", "updated", "detections", "ci", "information"),
         help="what local models send (with --levels 2)",
     )
     team.add_argument(
