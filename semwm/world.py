@@ -928,6 +928,12 @@ class WorldModel:
             held = self._ids.get(lineage)
             if held is not None:
                 self._lost.pop(held, None)
+        # a lineage shown again after a replay brought it back takes its own lost id
+        # back; one shown under another id is not lost under the old one
+        for object_id, pub in list(self._lost.items()):
+            if pub.lineage in current:
+                del self._lost[object_id]
+                self._ids.setdefault(pub.lineage, object_id)
         fresh = [t for lineage, t in current.items() if lineage not in self._ids]
         if fresh and self._lost:
             self._hand_over(fresh, dim)
@@ -987,7 +993,8 @@ class WorldModel:
         for a, b in zip(rows, cols, strict=True):
             if cost[a, b] < 1e9:
                 object_id, pub = lost[b]
-                self._ids.pop(pub.lineage, None)
+                if self._ids.get(pub.lineage) == object_id:  # not if it is shown anew
+                    del self._ids[pub.lineage]
                 self._ids[fresh[a].lineage] = object_id
                 del self._lost[object_id]
 
