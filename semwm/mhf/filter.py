@@ -159,10 +159,8 @@ class MultipleHypothesisFilter:
             else None
         )
         self.region = world.region
-        self._terms: dict[str, tuple[FloatArray, FloatArray, float]] = {}
-        self._last_terms: (
-            tuple[tuple[Track, ...], tuple[FloatArray, FloatArray, FloatArray]] | None
-        ) = None
+        self._terms: dict[str, tuple[FloatArray, FloatArray]] = {}
+        self._last_terms: tuple[tuple[Track, ...], FloatArray, FloatArray] | None = None
         # per class: (P_max, longest time unseen), infinite when the class sets none
         self._limits = {
             name: (
@@ -205,17 +203,15 @@ class MultipleHypothesisFilter:
         observed rates) for the objects it could have seen, times the probability that
         the object is inside the region; 0 for every other object."""
         tracks = predicted.tracks
-        margins, _, edges = self._region_terms(tracks)
         watched = observed.watched(
             scan,
             [t.sources for t in tracks],
             predicted.position,
-            margins,
+            self.region_margins(tracks),
             _unconfirmed(tracks),
             self._spread(predicted),
             self.kernels.range_coverage,
             self.kernels.hull_distance,
-            edges,
         )
         if not watched.any():
             return np.zeros(len(tracks))
@@ -246,7 +242,7 @@ class MultipleHypothesisFilter:
         sees the object (a ball out of view) says where it may be, not that it left; it
         leaves when its mean crosses the edge. A class with P_max counts its whole
         spread: P_max removes the estimates grown too uncertain."""
-        margins, noise, _ = self._region_terms(predicted.tracks)
+        margins, noise = self._region_terms(predicted.tracks)
         return predicted.inside_region(self.region, margins, self.kernels.inside_probability, noise)
 
     def region_margins(self, tracks: Sequence[Track]) -> FloatArray:
@@ -256,20 +252,17 @@ class MultipleHypothesisFilter:
         removed."""
         return self._region_terms(tracks)[0]
 
-    def _region_terms(self, tracks: Sequence[Track]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def _region_terms(self, tracks: Sequence[Track]) -> tuple[FloatArray, FloatArray]:
         """Per object, from its class's measurement noise (the default detector's):
-        ``(N, d)`` its region margins (:meth:`region_margins`), ``(N, d)`` the caps of
+        ``(N, d)`` its region margins (:meth:`region_margins`) and ``(N, d)`` the caps of
         its position variances for the region (:meth:`inside`: the noise variances, or
-        infinite, no cap, for a class with P_max or since removed), and ``(N,)`` its
-        range edge (m): the noise at the gate's one-dimensional quantile along its
-        widest axis, how far inside a detector's range an object must lie for a scan
-        that does not report it to count as a miss (:meth:`ObservedRates.watched`)."""
+        infinite, no cap, for a class with P_max or since removed)."""
         dim = self.factory.dim
         if not tracks:
-            return np.zeros((0, dim)), np.zeros((0, dim)), np.zeros(0)
+            return np.zeros((0, dim)), np.zeros((0, dim))
         last = self._last_terms  # a scan asks for one prediction's terms up to 3 times
         if last is not None and last[0] is tracks:
-            return last[1]
+            return last[1], last[2]
         terms = self._terms
         rows = []
         for t in tracks:
@@ -277,31 +270,27 @@ class MultipleHypothesisFilter:
             if known is None:
                 known = terms[t.cls] = self._class_region_terms(t.cls)
             rows.append(known)
-        result = (
-            np.array([r[0] for r in rows]),
-            np.array([r[1] for r in rows]),
-            np.array([r[2] for r in rows]),
-        )
+        margins = np.array([r[0] for r in rows])
+        caps = np.array([r[1] for r in rows])
         if isinstance(tracks, tuple):  # immutable: the same tuple has the same terms
-            self._last_terms = (tracks, result)
-        return result
+            self._last_terms = (tracks, margins, caps)
+        return margins, caps
 
-    def _class_region_terms(self, cls: str) -> tuple[FloatArray, FloatArray, float]:
+    def _class_region_terms(self, cls: str) -> tuple[FloatArray, FloatArray]:
         dim = self.factory.dim
         if cls not in self.knowledge.classes:
-            return np.zeros(dim), np.full(dim, np.inf), 0.0
+            return np.zeros(dim), np.full(dim, np.inf)
         R = self.factory.measurement_noise(cls, self.knowledge.default_detector)[:dim, :dim]
         noise = np.diagonal(R).astype(float)
-        margins = region_margins(R[None], self.knowledge.world.gate_probability)[0]
-        edge = float(margins.max())
         if self.knowledge.classes[cls].max_position_variance is not None:
             noise = np.full(dim, np.inf)  # its P_max removes what grew too uncertain
         # a class that moves (its filter has a velocity) crosses the region's edge by
         # entering and leaving; a static one sits on it (a table top on the region's
         # floor, a shelf on its wall): only its edge is soft
         if self.factory.filter_for(cls).state_size > dim:
-            return np.zeros(dim), noise, edge
-        return margins, noise, edge
+            return np.zeros(dim), noise
+        p = self.knowledge.world.gate_probability
+        return region_margins(R[None], p)[0], noise
 
     def class_rates(self, tracks: Sequence[Track]) -> np.ndarray:
         """Each object's class ``detection_frequency`` (Hz)."""

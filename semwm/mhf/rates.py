@@ -269,7 +269,6 @@ class ObservedRates:
         spread: FloatArray | None = None,
         ranged: RangeCoverage | None = None,
         hull: HullDistance | None = None,
-        range_edges: FloatArray | None = None,
     ) -> FloatArray:
         r"""``(N,)``: the probability that the scan could have seen each object, so that
         not reporting it is evidence that it is gone (docs/knowledge.md, "What semwm
@@ -278,10 +277,10 @@ class ObservedRates:
         * The scan gave its sensor's position and every detector of it has a
           ``range``: the probability that the object is within that range of the
           sensor (:func:`range_coverage`, with ``d`` its estimate's distance and ``s``
-          its ``spread``, m), the range shortened by the object's ``range_edges``
-          ``(N,)`` (m, its noise at the gate's quantile): an object within its noise
-          of the range's edge may be just outside it, and is then never detected
-          there, however often the sensor passes it by.
+          its ``spread``, m), the range shortened by the object's widest ``margins``
+          (its noise at the gate's quantile; zero for a class that moves): an object
+          that stands within its noise of the range's edge may be just outside it,
+          and is then never detected there, however often the sensor passes it by.
         * Every detector of the scan is declared ``static`` in the knowledge (fixed
           coverage): every object (the region's inside probability weighs it in
           :meth:`~semwm.mhf.filter.MultipleHypothesisFilter.miss_rates`).
@@ -305,12 +304,13 @@ class ObservedRates:
         count = len(sources)
         if count == 0:
             return np.zeros(0)
+        radius = margins.max(axis=1) if margins.size else np.zeros(count)
         if scan.sensor is not None and scan.reach is not None:
-            if range_edges is None or not range_edges.any():
+            if not radius.any():
                 return ranged(positions, scan.sensor, scan.reach, spread)
             covered = np.zeros(count)
-            for edge in np.unique(range_edges).tolist():  # one call per class, in effect
-                rows = np.flatnonzero(range_edges == edge)
+            for edge in np.unique(radius).tolist():  # one call per class, in effect
+                rows = np.flatnonzero(radius == edge)
                 covered[rows] = ranged(
                     positions[rows],
                     scan.sensor,
@@ -324,7 +324,6 @@ class ObservedRates:
         by_source = np.fromiter((source in s for s in sources), dtype=bool, count=count)
         if not by_source.any():
             return np.zeros(count)
-        radius = margins.max(axis=1) if margins.size else np.zeros(count)
         near = np.zeros(count, dtype=bool)
         if scan.positions.shape[0]:
             rows = np.flatnonzero(by_source)

@@ -357,10 +357,10 @@ def _pallet_then_scans_from(sensor_x: float, seconds: float) -> list[Any]:
 
 
 def test_an_object_on_the_ranges_edge_is_not_missed_scan_after_scan() -> None:
-    """The scanner's range is 6 m; a pallet exactly 6 m away may be just outside it, and
-    is then never detected there, however long the robot stands there: only the range
-    less the pallet's noise at the gate's quantile (0.31 m) counts (it was removed
-    within 3 s: half a miss every scan)."""
+    """The scanner's range is 6 m; a pallet (it stands still) exactly 6 m away may be just
+    outside it, and is then never detected there, however long the robot stands there:
+    only the range less the pallet's noise at the gate's quantile (0.31 m) counts (it
+    was removed within 3 s: half a miss every scan)."""
     assert len(_pallet_then_scans_from(4.0, seconds=30.0)) == 1
 
 
