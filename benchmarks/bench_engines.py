@@ -271,7 +271,7 @@ def existence_kernels(repeats: int, engines: tuple[Engine, ...]) -> list[dict[st
                     lambda: k.inside_probability(position, covariance, region, margin)  # noqa: B023
                 ),
                 "in_view_us": per_call(
-                    lambda: k.in_view_probability(position, covariance, view)  # noqa: B023
+                    lambda: k.in_view_probability(position, covariance, view, None)  # noqa: B023
                 ),
                 "survive_us": per_call(lambda: k.survive(r, mu, f, 0.1)),  # noqa: B023
                 "hull_us": per_call(lambda: k.hull_distance(position, corners)),  # noqa: B023

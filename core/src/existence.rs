@@ -267,7 +267,13 @@ fn remainder(a: f64, b: f64) -> f64 {
 /// `x + L g` (`L` the Cholesky factor of `P[:2, :2] + 1e-12 I`), each weighted by
 /// `GH_W[i] GH_W[j]` if it lies within `range` of the sensor and within `half_angle` of
 /// its heading.
-pub fn in_view_probability(x: &[f64], p: &[f64], d: usize, view: &View) -> KernelResult<f64> {
+pub fn in_view_probability(
+    x: &[f64],
+    p: &[f64],
+    d: usize,
+    view: &View,
+    margin: Option<f64>,
+) -> KernelResult<f64> {
     let a00 = p[0] + 1e-12;
     let a10 = p[d];
     let a11 = p[d + 1] + 1e-12;
@@ -294,14 +300,26 @@ pub fn in_view_probability(x: &[f64], p: &[f64], d: usize, view: &View) -> Kerne
             let ox = px - view.position[0];
             let oy = py - view.position[1];
             let mut inside = true;
+            let distance = (ox * ox + oy * oy).sqrt();
+            let m = margin.unwrap_or(0.0);
             if let Some(range) = view.range {
-                inside &= (ox * ox + oy * oy).sqrt() <= range;
+                inside &= distance <= range - m;
             }
             if let Some(half_angle) = view.half_angle {
                 let bearing = oy.atan2(ox) - view.heading;
                 let bearing =
                     remainder(bearing + std::f64::consts::PI, two_pi) - std::f64::consts::PI;
-                inside &= bearing.abs() <= half_angle;
+                // the angle to the nearer edge, and (with a margin) the distance to it
+                let slack = half_angle - bearing.abs();
+                inside &= slack >= 0.0;
+                if margin.is_some() {
+                    let to_edge = if slack >= 0.5 * std::f64::consts::PI {
+                        distance
+                    } else {
+                        distance * slack.sin()
+                    };
+                    inside &= to_edge >= m;
+                }
             }
             if inside {
                 total += GH_W[i] * GH_W[j];
@@ -390,12 +408,13 @@ mod tests {
             half_angle: Some(std::f64::consts::FRAC_PI_2),
         };
         // an object on the view's edge line, its spread symmetric: half in view
-        let p = in_view_probability(&[0.0, 5.0], &[1.0, 0.0, 0.0, 1.0], 2, &view).unwrap();
+        let p = in_view_probability(&[0.0, 5.0], &[1.0, 0.0, 0.0, 1.0], 2, &view, None).unwrap();
         // the points on the edge line count as in view: 0.5 + w_3 / 2
         assert!((p - (0.5 + GH_W[3] * 0.5)).abs() < 1e-14, "{p}");
-        let far = in_view_probability(&[100.0, 0.0], &[1.0, 0.0, 0.0, 1.0], 2, &view).unwrap();
+        let far =
+            in_view_probability(&[100.0, 0.0], &[1.0, 0.0, 0.0, 1.0], 2, &view, None).unwrap();
         assert!((far - 1.0).abs() < 1e-14);
-        let bad = in_view_probability(&[0.0, 0.0], &[-1.0, 0.0, 0.0, 1.0], 2, &view);
+        let bad = in_view_probability(&[0.0, 0.0], &[-1.0, 0.0, 0.0, 1.0], 2, &view, None);
         assert!(matches!(bad, Err(KernelError::NotPositiveDefinite(_))));
     }
 }

@@ -516,6 +516,22 @@ fn same_length(name: &str, values: &[f64], count: usize) -> PyResult<()> {
     }
 }
 
+/// An optional `(N,)` argument, one value per object, copied (`None` stays `None`).
+fn per_object(
+    name: &str,
+    array: Option<&Bound<'_, PyArray1<f64>>>,
+    count: usize,
+) -> PyResult<Option<Vec<f64>>> {
+    match array {
+        Some(a) => {
+            let (a, _) = values(a)?;
+            same_length(name, &a, count)?;
+            Ok(Some(a))
+        }
+        None => Ok(None),
+    }
+}
+
 /// Existence after `dt` seconds with no detection, and `log q`
 /// (`semwm.mhf.existence.survive`): `r`, `mu`, `f` `(N,)`.
 #[pyfunction]
@@ -617,9 +633,11 @@ fn inside_probability<'py>(
 /// The probability that each object lies in a sensor's view
 /// (`semwm.mhf.existence.in_view_probability`, 7 x 7 Gauss-Hermite): `position`
 /// `(N, d)`, `covariance` `(N, d, d)`, `d >= 2`; the view's `sensor` position (its first
-/// two entries), `heading` (rad), `range` (m) and `half_angle` (rad), either `None`.
+/// two entries), `heading` (rad), `range` (m) and `half_angle` (rad), either `None`; `margin`
+/// `(N,)` (m) or `None`: the view eroded by each object's margin.
 #[pyfunction]
-#[pyo3(signature = (position, covariance, sensor, heading, range=None, half_angle=None))]
+#[pyo3(signature = (position, covariance, sensor, heading, range=None, half_angle=None, margin=None))]
+#[allow(clippy::too_many_arguments)] // the Python signature: one argument per part of the view
 fn in_view_probability<'py>(
     py: Python<'py>,
     position: &Bound<'py, PyArray2<f64>>,
@@ -628,9 +646,11 @@ fn in_view_probability<'py>(
     heading: f64,
     range: Option<f64>,
     half_angle: Option<f64>,
+    margin: Option<&Bound<'py, PyArray1<f64>>>,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let (x, p, count, d) = estimates(position, covariance)?;
     let (sensor, _) = values(sensor)?;
+    let margin = per_object("margin", margin, count)?;
     if d < 2 || sensor.len() < 2 {
         return Err(PyValueError::new_err(format!(
             "position and sensor: expected at least 2 entries, got {d} and {}",
@@ -651,6 +671,7 @@ fn in_view_probability<'py>(
                     &p[i * d * d..(i + 1) * d * d],
                     d,
                     &view,
+                    margin.as_ref().map(|m| m[i]),
                 )
             })
             .collect::<KernelResult<Vec<f64>>>()
@@ -696,14 +717,7 @@ fn range_coverage<'py>(
     let (x, shape) = values(positions)?;
     let (count, d) = (shape[0], shape[1]);
     let (sensor, _) = values(sensor)?;
-    let spread = match spread {
-        Some(s) => {
-            let (s, _) = values(s)?;
-            same_length("spread", &s, count)?;
-            Some(s)
-        }
-        None => None,
-    };
+    let spread = per_object("spread", spread, count)?;
     let result = run(py, "range_coverage", || {
         Ok((0..count)
             .map(|i| {

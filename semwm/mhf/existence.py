@@ -178,13 +178,20 @@ _GRID_W = np.outer(_GH_W, _GH_W).reshape(-1)
 
 
 def in_view_probability(
-    position: FloatArray, covariance: FloatArray, view: SensorView
+    position: FloatArray,
+    covariance: FloatArray,
+    view: SensorView,
+    margin: FloatArray | None = None,
 ) -> FloatArray:
     """Probability that each object lies in the sensor's view (a disc sector of radius
     ``range`` and opening ``2 half_angle`` around ``heading``), from its Gaussian
     position estimate's horizontal marginal, by a 7 x 7 Gauss-Hermite rule.
 
     ``position`` ``(N, d)``, ``covariance`` ``(N, d, d)``; returns ``(N,)``.
+    ``margin`` ``(N,)`` (m): the view eroded by each object's margin, a node counts
+    only at least that far inside the range and from both edges of the opening (an
+    object that stands within its noise of the view's edge may be just outside it,
+    and is then never detected there, however often the sensor looks).
     """
     count = position.shape[0]
     if count == 0:
@@ -194,13 +201,19 @@ def in_view_probability(
     L = np.linalg.cholesky(cov)  # (N, 2, 2)
     points = mean[:, None, :] + np.einsum("nij,kj->nki", L, _GRID)  # (N, K, 2)
     offset = points - view.position[None, None, :2]
+    m = np.zeros((count, 1)) if margin is None else np.asarray(margin, dtype=float)[:, None]
+    distance = np.linalg.norm(offset, axis=-1)
     inside = np.ones(offset.shape[:2], dtype=bool)
     if view.range is not None:
-        inside &= np.linalg.norm(offset, axis=-1) <= view.range
+        inside &= distance <= view.range - m
     if view.half_angle is not None:
         bearing = np.arctan2(offset[..., 1], offset[..., 0]) - view.heading
         bearing = (bearing + np.pi) % (2.0 * np.pi) - np.pi
-        inside &= np.abs(bearing) <= view.half_angle
+        slack = view.half_angle - np.abs(bearing)  # the angle to the nearer edge
+        inside &= slack >= 0.0
+        if margin is not None:  # the distance to that edge (a ray from the sensor)
+            to_edge = np.where(slack >= 0.5 * np.pi, distance, distance * np.sin(slack))
+            inside &= to_edge >= m
     result: FloatArray = inside.astype(float) @ _GRID_W
     return result
 
@@ -226,9 +239,12 @@ def looked_at(
     knowledge: Knowledge,
     kernels: ExistenceKernels | None = None,
     observed: Mapping[str, float] | None = None,
+    margins: FloatArray | None = None,
 ) -> tuple[dict[int, float], dict[int, float]]:
     """Negative information of one scan: the existence of every predicted version after
     the scan did not report it, and the log missed-detection likelihood of each.
+    ``margins`` ``(N,)`` (m): each object's margin the view is eroded by
+    (:func:`in_view_probability`; a class that stands still: its region margin).
 
     The detection probability is state-dependent: ``P_D(class) * P(in view)``, with
     P_D the class's ``detection_probability``, or (``observed``, per class) the one the
@@ -244,7 +260,7 @@ def looked_at(
         return {}, {}
     in_view = in_view_probability if kernels is None else kernels.in_view_probability
     update = missed if kernels is None else kernels.missed
-    inside = in_view(predicted.position, predicted.position_covariance, view)
+    inside = in_view(predicted.position, predicted.position_covariance, view, margins)
     p = np.array(
         [
             0.0

@@ -159,6 +159,10 @@ class MultipleHypothesisFilter:
             else None
         )
         self.region = world.region
+        # sqrt(chi2_1 quantile of gate_probability): a margin in standard deviations
+        self._gate_quantile = float(
+            region_margins(np.ones((1, 1, 1)), knowledge.world.gate_probability)[0, 0]
+        )
         self._terms: dict[str, tuple[FloatArray, FloatArray]] = {}
         self._last_terms: tuple[tuple[Track, ...], FloatArray, FloatArray] | None = None
         # per class: (P_max, longest time unseen), infinite when the class sets none
@@ -407,6 +411,13 @@ class MultipleHypothesisFilter:
                 if isinstance(option, DetectionOptions)
                 for k in option.existing
             }
+            # an object the view's source has never reported, standing on the view's
+            # edge, may be just outside it: the view eroded by its margin for it
+            never = np.array([(view.source or "") not in t.sources for t in predicted.tracks])
+            edges = never * np.minimum(
+                self.region_margins(predicted.tracks).max(axis=1, initial=0.0),
+                self._gate_quantile * self._spread(predicted),
+            )
             r_view, log_q_view = looked_at(
                 view,
                 predicted,
@@ -415,6 +426,7 @@ class MultipleHypothesisFilter:
                 self.knowledge,
                 self.kernels,
                 self._view_detection(state.observed, view) if self.observed_rates else None,
+                edges if edges.any() else None,  # things that stand still: the eroded view
             )
             table.existence.update(r_view)
             clusters = self.undetected(clusters, log_q_view, table.tracks)

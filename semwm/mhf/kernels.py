@@ -35,7 +35,9 @@ class ExistenceKernels:
     inside_probability: Callable[
         [FloatArray, FloatArray, Region | None, FloatArray | None], FloatArray
     ]
-    in_view_probability: Callable[[FloatArray, FloatArray, SensorView], FloatArray]
+    in_view_probability: Callable[
+        [FloatArray, FloatArray, SensorView, FloatArray | None], FloatArray
+    ]
     range_coverage: rates.RangeCoverage
     hull_distance: rates.HullDistance
 

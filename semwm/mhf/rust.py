@@ -72,7 +72,10 @@ def inside_probability(
 
 
 def in_view_probability(
-    position: FloatArray, covariance: FloatArray, view: SensorView
+    position: FloatArray,
+    covariance: FloatArray,
+    view: SensorView,
+    margin: FloatArray | None = None,
 ) -> FloatArray:
     """:func:`semwm.mhf.existence.in_view_probability`."""
     if position.shape[0] == 0:
@@ -85,6 +88,7 @@ def in_view_probability(
         float(view.heading),
         None if view.range is None else float(view.range),
         None if view.half_angle is None else float(view.half_angle),
+        None if margin is None else _f64(margin),
     )
     return result
 

@@ -123,6 +123,24 @@ def test_in_view_probability(
     view = SensorView(0.0, None, rng.uniform(-3.0, 3.0, 2), heading, view_range, half_angle)
     expected = existence.in_view_probability(position, covariance, view)
     _close(rust.in_view_probability(position, covariance, view), expected)
+    margin = rng.uniform(0.0, 1.5, n)  # the view eroded by each object's margin
+    eroded = existence.in_view_probability(position, covariance, view, margin)
+    _close(rust.in_view_probability(position, covariance, view, margin), eroded)
+    assert np.all(eroded <= expected + 1e-12)
+
+
+def test_an_eroded_view_counts_only_what_is_its_margin_inside() -> None:
+    """A view of 5 m and +-45 degrees from the origin, heading along x; a point estimate
+    (1 mm) 0.2 m inside the upper edge counts with margin 0.1 m, not with 0.3 m; 4.8 m
+    along the axis likewise against the range."""
+    view = SensorView(0.0, None, np.zeros(2), 0.0, 5.0, math.pi / 4)
+    along_edge = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4)]) * 3.0
+    inward = np.array([math.sin(math.pi / 4), -math.cos(math.pi / 4)])
+    position = np.array([along_edge + 0.2 * inward, [4.8, 0.0]])
+    covariance = np.tile(1e-6 * np.eye(2), (2, 1, 1))
+    for kernel in (existence.in_view_probability, rust.in_view_probability):
+        assert kernel(position, covariance, view, np.array([0.1, 0.1])) == pytest.approx([1, 1])
+        assert kernel(position, covariance, view, np.array([0.3, 0.3])) == pytest.approx([0, 0])
 
 
 def test_in_view_probability_of_a_covariance_that_is_not_positive_definite() -> None:

@@ -367,3 +367,42 @@ def test_an_object_on_the_ranges_edge_is_not_missed_scan_after_scan() -> None:
 def test_an_object_well_inside_the_range_and_not_reported_is_removed() -> None:
     """The same robot 4 m from where the pallet stood: the pallet is gone within 2 s."""
     assert _pallet_then_scans_from(6.0, seconds=2.0) == []
+
+
+LEFTBEHIND = Path(__file__).parents[2] / "benchmarks" / "knowledge" / "leftbehind.yaml"
+
+
+def _cup_then_views(reported_by_cam2: bool, seconds: float) -> list[Any]:
+    """A cup at (0, 3) reported 20 times by the robot's camera; cam2 at (0, 7.5) looks
+    along -45 degrees (field of view 90 degrees, 5 m): the cup is 4.5 m away, 0.5 cm
+    outside the edge of its view. cam2 then posts empty views every 0.2 s."""
+    from semwm.detection import SensorReport
+
+    wm = WorldModel(load_knowledge(LEFTBEHIND))
+    for i in range(20):
+        source = "cam2" if reported_by_cam2 and i % 2 else "robot"
+        detector = "cam2" if source == "cam2" else "camera"
+        wm.ingest(
+            [{"time": 0.1 * i, "class": "Cup", "position": [0.005, 3.0],
+              "source": source, "detector": detector}]
+        )  # fmt: skip
+    for k in range(1, round(seconds / 0.2) + 1):
+        view = SensorReport(
+            pose=(0.0, 7.5, -math.pi / 4), time=2.0 + 0.2 * k, source="cam2", detector="cam2"
+        )
+        wm.ingest([], sensor=view)
+    return [o for o in wm.world().objects if abs(o.position[1] - 3.0) < 0.5]
+
+
+def test_an_object_on_a_views_edge_its_sensor_never_reported_stays() -> None:
+    """cam2 has never reported the cup on the edge of its view: it may be just outside
+    it (the view is eroded by the cup's margin, at most its estimate's spread at the
+    gate's quantile), and a minute of cam2's empty views leave it (issue 28's leftbehind
+    (c); it was gone within seconds, half a miss every view)."""
+    assert len(_cup_then_views(reported_by_cam2=False, seconds=60.0)) == 1
+
+
+def test_an_object_on_a_views_edge_its_sensor_reported_leaves_when_it_stops() -> None:
+    """The same cup, but cam2 has reported it: there it could see it, and its empty views
+    deny it."""
+    assert _cup_then_views(reported_by_cam2=True, seconds=10.0) == []
