@@ -438,8 +438,16 @@ class MultipleHypothesisFilter:
         tracks = {k: table.tracks[k] for k in referenced}
         kept = {k: table.existence.get(k, 1.0) for k in referenced}
         observed = state.observed
-        if (self.observed_rates or self.missed_detections) and measurements:
-            observed = self._observe(observed, state.tracks, options, final, table, time)
+        if (self.observed_rates or self.missed_detections) and (measurements or view):
+            observed = self._observe(
+                observed,
+                state.tracks,
+                options,
+                final,
+                table,
+                time,
+                *self._scanner(measurements, view),
+            )
         return MHFState(final, tracks, time, table.next_key, kept, observed)
 
     def _expand_scan(
@@ -579,10 +587,13 @@ class MultipleHypothesisFilter:
         final: Sequence[Cluster],
         table: _TrackTable,
         time: float,
+        source: str,
+        scanned: frozenset[str],
     ) -> ObservedRates:
-        """The observed rates after the scan: per detector, which objects its detections
-        updated or started in the most probable hypothesis (:mod:`semwm.mhf.rates`), and
-        which it started in the others (they see those too, but do not count them)."""
+        """The observed rates after the scan of ``source`` by the detectors ``scanned``:
+        per detector, which objects its detections updated or started in the most
+        probable hypothesis (:mod:`semwm.mhf.rates`), and which it started in the others
+        (they see those too, but do not count them)."""
         detector_of: dict[int, str] = {}
         for option in options:
             detector = option.measurement.detector
@@ -615,11 +626,21 @@ class MultipleHypothesisFilter:
                 if by is not None and lineage not in existed:
                     born_elsewhere.setdefault(by, []).append(lineage)
         first = options[0].measurement if options else None
-        source = (first.source or "") if first is not None else ""
         sensor = None if first is None or first.sensor is None else tuple(first.sensor.tolist())
         return observed.after_scan(
-            source, time, detected, born, alive, sensor, classes, born_elsewhere
+            source, time, detected, born, alive, sensor, classes, born_elsewhere, scanned
         )
+
+    def _scanner(
+        self, measurements: Sequence[Measurement], view: SensorView | None
+    ) -> tuple[str, frozenset[str]]:
+        """The scan's source and the detectors that made it; an empty scan with a view
+        looked with the view's detector (the default one if it names none) and saw
+        nothing: its misses count too."""
+        if measurements:
+            return measurements[0].source or "", frozenset(m.detector for m in measurements)
+        assert view is not None
+        return view.source or "", frozenset({view.detector or self.knowledge.default_detector})
 
     def undetected(
         self,

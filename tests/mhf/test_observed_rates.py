@@ -10,7 +10,13 @@ import pytest
 
 from semwm import WorldModel
 from semwm.knowledge.loader import knowledge_from_text
-from semwm.mhf.rates import WINDOW_DETECTIONS, ObservedRates, ScanCoverage, hull_distance
+from semwm.mhf.rates import (
+    DISCOUNT,
+    WINDOW_DETECTIONS,
+    ObservedRates,
+    ScanCoverage,
+    hull_distance,
+)
 
 KNOWLEDGE = """
 world: {dimension: 2, region: [[0, 4], [0, 3]], observed_detection_rates: %s}
@@ -213,11 +219,49 @@ def test_a_stream_counts_each_class_at_its_own_rate_from_the_knowledges_prior() 
     assert rates.rate(stream, "Table", 0.5) == pytest.approx(2.5 * 0.2, abs=0.25)
     # a class the stream has not counted yet: no rate of its own (the class rate holds)
     assert rates.rate(stream, "Can", 2.0) == 0.0
-    # the prior's mean is the knowledge's per-scan probability, 0.5 Hz x 0.4 s: after
-    # one miss, (0 hits + 2 x 0.2) / (1 expected + 2) per scan
-    first = ObservedRates().after_scan("c", 0.0, {}, {"camera": [1]}, {1}, classes={1: "Table"})
-    first = first.after_scan("c", 0.4, {}, {}, {1}, classes={1: "Table"})
+    # the prior's mean is the knowledge's per-scan probability, 0.5 Hz x 0.4 s: a table
+    # started, detected again, then missed: (0 hits + 2 x 0.2) / (1 expected + 2) per scan
+    table_ = {1: "Table"}
+    first = ObservedRates().after_scan("c", 0.0, {}, {"camera": [1]}, {1}, classes=table_)
+    first = first.after_scan("c", 0.4, {"camera": [1]}, {}, {1}, classes=table_)
+    first = first.after_scan("c", 0.8, {}, {}, {1}, classes=table_)
     assert first.rate(("c", "camera"), "Table", 0.5) == pytest.approx((2 * 0.2 / 3) / 0.4)
+
+
+def test_a_lineage_a_stream_started_and_never_saw_again_is_no_miss() -> None:
+    # clutter: each scan starts a new Book that nothing confirms. Counting those as
+    # misses would drive the stream's Book detection probability to 0 (a real book
+    # would then never be missed); they are false alarms, counted as such (each lives
+    # one scan more than the one that started it)
+    rates = ObservedRates()
+    classes = {k: "Book" for k in range(200)}
+    for k in range(200):
+        rates = rates.after_scan("c", k / 10, {}, {"camera": [k]}, {k - 1, k}, classes=classes)
+    assert rates.streams[("c", "camera", "Book")].expected == 0.0
+    assert rates.false_alarms[("c", "camera")].count == 198
+
+
+def test_a_scan_counts_misses_only_for_the_detectors_that_made_it() -> None:
+    # one source, a camera and a laser: the laser's scans are no misses of the camera
+    classes = {1: "Cup"}
+    rates = ObservedRates()
+    for k in range(3):  # the camera detects the cup twice in a row: one hit
+        rates = rates.after_scan(
+            "r",
+            k / 10,
+            {"camera": [1]} if k else {},
+            {} if k else {"camera": [1]},
+            {1},
+            classes=classes,
+            scanned={"camera"},
+        )
+    rates = rates.after_scan("r", 0.35, {}, {}, {1}, classes=classes, scanned={"laser"})
+    assert rates.streams[("r", "camera", "Cup")].expected == 1.0  # unchanged
+    assert rates.streams[("r", "camera", "Cup")].hits == 1.0
+    # the camera's next scan, empty (it looked and saw nothing): a miss
+    rates = rates.after_scan("r", 0.4, {}, {}, {1}, classes=classes, scanned={"camera"})
+    assert rates.streams[("r", "camera", "Cup")].expected == pytest.approx(1.0 * DISCOUNT + 1.0)
+    assert rates.streams[("r", "camera", "Cup")].hits == pytest.approx(DISCOUNT)
 
 
 SIM1_LIKE = """
