@@ -774,20 +774,24 @@ class WorldService:
         """The counts (stored, clusters, log10 of the joint), the limit applied and the
         best hypotheses.
 
-        Each hypothesis lists every object it holds, so the answer's size (and the time
-        it holds the world) grows with ``limit`` times the objects: the limit applied
-        is lowered so that the answer lists at most :attr:`hypothesis_objects` objects
-        (issue 30; the search itself costs the same for any number of clusters)."""
+        Each hypothesis lists every object it holds, so the answer's size grows with
+        ``limit`` times the objects: the limit applied is lowered so that the answer
+        lists at most :attr:`hypothesis_objects` objects (issue 30; the search itself
+        costs the same for any number of clusters). Under the world's lock only the
+        view is taken (:meth:`WorldModel.hypotheses_view`: references to the immutable
+        state and a copy of the public ids, less than a scan's publishing); the counts,
+        the search and the answer are made after, while scans go on."""
         with self._locked():
             objects = max(1, self._model.object_count)
-            applied = max(1, min(limit, self.hypothesis_objects // objects))
-            counts = {
-                "total": self._model.hypothesis_count,
-                "clusters": self._model.cluster_count,
-                "log10_joint": self._model.log10_joint_hypotheses,
-                "limit": applied,
-            }
-            return counts, list(self._model.hypotheses(applied))
+            view = self._model.hypotheses_view()
+        applied = max(1, min(limit, self.hypothesis_objects // objects))
+        counts = {
+            "total": view.hypothesis_count,
+            "clusters": view.cluster_count,
+            "log10_joint": view.log10_joint_hypotheses,
+            "limit": applied,
+        }
+        return counts, view.best(applied)
 
     def health(self) -> dict[str, Any]:
         """A summary of the world as of the last commit; never waits for the lock."""
