@@ -142,7 +142,7 @@ def add_persistence_options(parser: argparse.ArgumentParser) -> None:
 SAFETY_OPTIONS = (
     "token", "token_file", "read_token", "insecure", "cors_origins", "allowed_hosts",
     "max_body", "max_sources", "stuck_after", "max_client_connections", "stream_lifetime",
-    "stream_send_timeout", "max_waiting",
+    "stream_send_timeout", "max_waiting", "max_streams", "max_client_streams",
 )  # fmt: skip
 
 
@@ -179,6 +179,14 @@ def add_safety_options(parser: argparse.ArgumentParser) -> None:
         help="connections one client address may hold (128; raise it behind a proxy)",
     )
     group.add_argument("--stream-lifetime", type=float, help="s before a /world/stream ends (3600)")
+    group.add_argument(
+        "--max-streams", type=int, help="/world/stream responses open at once; one more: 503 (64)"
+    )
+    group.add_argument(
+        "--max-client-streams",
+        type=int,
+        help="/world/stream responses one client address may hold; one more: 429 (8)",
+    )
     group.add_argument(
         "--stream-send-timeout",
         type=float,
