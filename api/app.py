@@ -90,6 +90,7 @@ def create_app(settings: Settings, *, fast_ingest: bool = True) -> FastAPI:
                 stuck_after=settings.stuck_after,
             )
             app.state.world.max_waiting = settings.max_waiting
+            app.state.world.replay_limit = settings.replay_limit
             logger.info(
                 "world model built from %s (engine %s)",
                 settings.knowledge,
