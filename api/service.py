@@ -625,8 +625,9 @@ class WorldService:
         A replay redoes every scan after the late one, so under load each late scan
         costs more than the scans that made it late, the service falls further behind
         and more scans come late: a storm (issue 30; measured again with one core taken
-        and robots that queue late frames: 13,654 scans replayed in 30 s, 422 det/s
-        acknowledged of 1,500, the robots 30 s behind). While behind, the reorder
+        and robots that queue late frames: 14,991 scans replayed, 365 det/s
+        acknowledged of 1,500, the robots 30 s behind after a 30 s run; now 783, 965
+        det/s and 0.07 s: benchmarks/results/teamload_overload.md). While behind, the reorder
         window is in effect the order tolerance: a scan that is late is as final a
         409 as one beyond the window. Not a 503 with ``Retry-After``: a late scan sent
         again later is later still, and a robot that waits ``Retry-After`` before each

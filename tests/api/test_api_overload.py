@@ -140,8 +140,8 @@ def test_while_replays_take_the_service_s_time_a_late_scan_is_refused_not_replay
     client: TestClient, service: WorldService, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The storm of case 9 measured again (benchmarks/bench_teamload.py --overload):
-    robots that queue late frames, one core taken, 13,654 scans replayed in 30 s and
-    422 det/s acknowledged of 1,500. Each late scan replays every later one, so under
+    robots that queue late frames, one core taken, 14,991 scans replayed in a 30 s run
+    and 365 det/s acknowledged of 1,500. Each late scan replays every later one, so under
     load the replays feed themselves. Behind (replays took more than replay_limit of
     the last second), a late scan is a 409 at once, nothing applied, counted late."""
     for t, source in ((10.0, "r1"), (10.2, "r2")):
