@@ -14,6 +14,7 @@ from starlette.types import Receive, Scope, Send
 
 from api.deps import SettingsDep
 from api.feed import StreamSlots, WorldFeed
+from api.schemas import MessageOut
 
 logger = logging.getLogger("api")
 
@@ -43,7 +44,11 @@ def live_page() -> FileResponse:
     "/world/stream",
     summary="The world, pushed as Server-Sent Events",
     response_class=StreamingResponse,
-    responses={200: {"content": {"text/event-stream": {}}, "description": "An endless stream"}},
+    responses={
+        200: {"content": {"text/event-stream": {}}, "description": "An endless stream"},
+        429: {"model": MessageOut, "description": "This client holds --max-client-streams"},
+        503: {"model": MessageOut, "description": "The service serves --max-streams"},
+    },
 )
 async def world_stream(request: Request, feed: FeedDep, settings: SettingsDep) -> StreamingResponse:
     """Server-Sent Events: ``knowledge`` first, then ``world`` after every change.
