@@ -21,7 +21,7 @@ from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 from api.deps import get_world
 from api.errors import BugBarrier, install_error_handlers
-from api.feed import WorldFeed
+from api.feed import StreamSlots, WorldFeed
 from api.guard import RequestGuard
 from api.ingest_fast import FastIngest
 from api.logs import RequestIdMiddleware
@@ -90,6 +90,7 @@ def create_app(settings: Settings, *, fast_ingest: bool = True) -> FastAPI:
                 stuck_after=settings.stuck_after,
             )
             app.state.world.max_waiting = settings.max_waiting
+            app.state.world.replay_limit = settings.replay_limit
             logger.info(
                 "world model built from %s (engine %s)",
                 settings.knowledge,
@@ -216,6 +217,7 @@ async def _live(app: FastAPI, settings: Settings, service: WorldService) -> Asyn
     feed = WorldFeed(service)
     await feed.start()
     app.state.feed = feed
+    app.state.stream_slots = StreamSlots(settings.max_streams, settings.max_client_streams)
     bridge = None
     if settings.foxglove_port is not None:
         from api.foxglove_bridge import FoxgloveBridge

@@ -70,6 +70,16 @@ class Overloaded(ApiError):
         self.headers = {"Retry-After": str(retry_after)}
 
 
+class TooManyStreams(ApiError):
+    """429 (this client holds its share of streams) or 503 (the service holds all it
+    serves) with ``Retry-After``: no stream was opened."""
+
+    def __init__(self, message: str, *, per_client: bool, retry_after: int) -> None:
+        super().__init__(message)
+        self.status = 429 if per_client else 503
+        self.headers = {"Retry-After": str(retry_after)}
+
+
 class InvalidError(ApiError):
     """422 with one ``{"loc", "msg", "type"}`` item per problem, like FastAPI's own."""
 

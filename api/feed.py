@@ -68,6 +68,58 @@ class _Pending:
     knowledge: bool = False
 
 
+class StreamSlots:
+    """The ``GET /world/stream`` responses open, in all and per client (peer address).
+
+    Each stream holds a connection slot for up to its lifetime, so without a bound one
+    client (or a few) could hold every slot with streams (issue 30). :meth:`take` a
+    slot before a stream starts, :meth:`give` it back when it ends; used in the event
+    loop only (no lock).
+    """
+
+    RETRY_AFTER = 5  # s: about when a dropped or ended stream frees a slot
+
+    def __init__(self, total: int, per_client: int) -> None:
+        self.total = total
+        self.per_client = per_client
+        self._open: dict[str, int] = {}
+
+    @property
+    def open(self) -> int:
+        return sum(self._open.values())
+
+    def take(self, client: str) -> None:
+        """Count a new stream of ``client``, or raise :class:`~api.errors.TooManyStreams`
+        (429: the client holds ``per_client``; 503: the service holds ``total``)."""
+        from api.errors import TooManyStreams
+
+        held = self._open.get(client, 0)
+        if held >= self.per_client:
+            raise TooManyStreams(
+                f"this client holds {held} open /world/stream responses, the most one client "
+                f"may (--max-client-streams {self.per_client}); close one, or retry after "
+                f"{self.RETRY_AFTER} s",
+                per_client=True,
+                retry_after=self.RETRY_AFTER,
+            )
+        if self.open >= self.total:
+            raise TooManyStreams(
+                f"the service serves {self.open} open /world/stream responses, the most it "
+                f"serves (--max-streams {self.total}); retry after {self.RETRY_AFTER} s",
+                per_client=False,
+                retry_after=self.RETRY_AFTER,
+            )
+        self._open[client] = held + 1
+
+    def give(self, client: str) -> None:
+        """A stream of ``client`` ended (its slot is free)."""
+        left = self._open.get(client, 0) - 1
+        if left > 0:
+            self._open[client] = left
+        else:
+            self._open.pop(client, None)
+
+
 class WorldFeed:
     """Throttled world snapshots for push subscribers.
 

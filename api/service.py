@@ -263,6 +263,13 @@ class WorldService:
         self.max_waiting = 64  # writes queued for the world beyond which new ones get 503
         self.hypothesis_objects = 100_000  # the most objects one GET /hypotheses lists
         self.shed = 0  # writes refused so (since start)
+        # late scans refused (409) instead of replayed while replays took more than
+        # replay_limit of the last replay_window s (issue 30: a replay storm)
+        self.replay_limit = 0.1
+        self.replay_window = 1.0  # s
+        self.shed_late = 0
+        self._replaying = 0.0  # the share of time spent replaying, as of _replaying_at
+        self._replaying_at = time.monotonic()
         self.dropped_late = 0  # scans of 'late: drop' sources dropped (since start)
         # the damage the data directory's last start found: problems, [first, last] lost
         self.store_damage: tuple[list[str], list[int] | None] | None = None
@@ -384,6 +391,26 @@ class WorldService:
                 self._busy_since = None
         finally:
             self._lock.release()
+
+    def replay_share(self, now: float | None = None) -> float:
+        """The share of recent time the world spent replaying scans (an older scan came
+        after them): an exponentially weighted average over :attr:`replay_window` s
+        (1 = replaying all the time). Above :attr:`replay_limit` the service is behind
+        and late scans are refused, not replayed (:meth:`_refuse_late_if_behind`).
+
+        .. math:: u(t) = \\frac{1}{\\tau} \\int_{-\\infty}^{t} r(s)\\, e^{-(t - s) / \\tau}\\, ds
+
+        with :math:`\\tau` = :attr:`replay_window` and :math:`r(s)` 1 while replaying.
+        """
+        elapsed = (time.monotonic() if now is None else now) - self._replaying_at
+        return self._replaying * math.exp(-max(elapsed, 0.0) / self.replay_window)
+
+    def _count_replay(self, seconds: float, now: float | None = None) -> None:
+        """Add ``seconds`` of replaying that ended ``now`` to :meth:`replay_share`."""
+        now = time.monotonic() if now is None else now
+        tau = self.replay_window
+        self._replaying = self.replay_share(now) + (1.0 - math.exp(-seconds / tau))
+        self._replaying_at = now
 
     @contextmanager
     def _change(self) -> Iterator[None]:
@@ -508,6 +535,7 @@ class WorldService:
             self.dropped_late += 1
             dropped = IngestResult(applied=0, time=self._model.latest_time)
             return Committed(dropped, self._commit, dropped=True)
+        self._refuse_late_if_behind(placement)
         placed = [
             d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
         ]
@@ -518,7 +546,12 @@ class WorldService:
             self._check_sources(placed, batch)
             try:
                 with self._hooked(batch_record(placed, sensor)):
+                    replayed, began = self._model.replayed_scans, time.perf_counter()
                     result = self._model.ingest(placed, sensor=sensor)
+                    replayed = self._model.replayed_scans - replayed
+                    if replayed > 0:  # its share of the time: the scans it processed again
+                        took = time.perf_counter() - began
+                        self._count_replay(took * replayed / (replayed + 1))
             except DetectionError as error:
                 raise InvalidError(problems_to_items(error.problems, batch)) from error
             except OutOfOrderError as error:
@@ -562,18 +595,62 @@ class WorldService:
         """Whether a batch is late (older than the newest scan processed: it would be
         replayed, or refused) and every source of it asked for late scans to be
         dropped (``PUT /sources/NAME/policy {"late": "drop"}``)."""
-        newest = self._model.processed_time
-        if newest is None or self._model.hold != 0 or not placement.counts:
+        earliest = self._late_by(placement)
+        if earliest is None:
             return False
         with self._sources_lock:
-            if not all(self.sources.drops_late(s) for s in placement.counts):
-                return False
+            return all(self.sources.drops_late(s) for s in placement.counts)
+
+    def _late_by(self, placement: Placement) -> float | None:
+        """How much older than the newest scan processed a placed batch's earliest
+        detection is (s), ``None`` when it is not (or under a hold, which orders scans
+        itself): a late batch makes the world replay every scan after it."""
+        newest = self._model.processed_time
+        if newest is None or self._model.hold != 0 or not placement.counts:
+            return None
         times = [
             t
             for d in placement.detections
             if isinstance(t := (d.time if isinstance(d, Detection) else d.get("time")), float | int)
+            and not isinstance(t, bool)
         ]
-        return bool(times) and min(times) < newest
+        earliest = min(times, default=math.inf)
+        return newest - earliest if earliest < newest else None
+
+    def _refuse_late_if_behind(self, placement: Placement) -> None:
+        """409 at once for a late batch (it would be replayed) while the service is
+        behind: replays took more than :attr:`replay_limit` of the last
+        :attr:`replay_window` s. Nothing is applied; the source's ``late`` counts it.
+
+        A replay redoes every scan after the late one, so under load each late scan
+        costs more than the scans that made it late, the service falls further behind
+        and more scans come late: a storm (issue 30; measured again with one core taken
+        and robots that queue late frames: 14,991 scans replayed, 365 det/s
+        acknowledged of 1,500, the robots 30 s behind after a 30 s run; now 783, 965
+        det/s and 0.07 s: benchmarks/results/teamload_overload.md). While behind, the reorder
+        window is in effect the order tolerance: a scan that is late is as final a
+        409 as one beyond the window. Not a 503 with ``Retry-After``: a late scan sent
+        again later is later still, and a robot that waits ``Retry-After`` before each
+        of its queued scans falls further behind the others, whose scans then make all
+        of its own too late (20 s trials, one core taken: 73 % 409 and 173 det/s with a
+        503, 39 % and 918 det/s with this 409)."""
+        late = self._late_by(placement)
+        if late is None or late > self._model.reorder_window:
+            return  # in order; or beyond the window, where the model's 409 says so
+        share = self.replay_share()
+        if share <= self.replay_limit:
+            return
+        self.shed_late += 1
+        message = (
+            f"the service is behind (replays took {100 * share:.0f} % of the last "
+            f"{self.replay_window:g} s, more than {100 * self.replay_limit:.0f} %): this batch "
+            f"is {1000 * late:.1f} ms older than the newest scan processed and is not "
+            "replayed while the service is behind; nothing was applied. Send scans in time "
+            'order, or drop late scans (PUT /sources/NAME/policy {"late": "drop"})'
+        )
+        with self._sources_lock:
+            self.sources.late(placement, message)
+        raise ConflictError(message)
 
     def _check_sources(self, detections: Sequence[dict[str, Any]], batch: bool) -> None:
         """Hold at most ``max_sources`` distinct sources (422 for a new one beyond)."""
@@ -774,20 +851,24 @@ class WorldService:
         """The counts (stored, clusters, log10 of the joint), the limit applied and the
         best hypotheses.
 
-        Each hypothesis lists every object it holds, so the answer's size (and the time
-        it holds the world) grows with ``limit`` times the objects: the limit applied
-        is lowered so that the answer lists at most :attr:`hypothesis_objects` objects
-        (issue 30; the search itself costs the same for any number of clusters)."""
+        Each hypothesis lists every object it holds, so the answer's size grows with
+        ``limit`` times the objects: the limit applied is lowered so that the answer
+        lists at most :attr:`hypothesis_objects` objects (issue 30; the search itself
+        costs the same for any number of clusters). Under the world's lock only the
+        view is taken (:meth:`WorldModel.hypotheses_view`: references to the immutable
+        state and a copy of the public ids, less than a scan's publishing); the counts,
+        the search and the answer are made after, while scans go on."""
         with self._locked():
             objects = max(1, self._model.object_count)
-            applied = max(1, min(limit, self.hypothesis_objects // objects))
-            counts = {
-                "total": self._model.hypothesis_count,
-                "clusters": self._model.cluster_count,
-                "log10_joint": self._model.log10_joint_hypotheses,
-                "limit": applied,
-            }
-            return counts, list(self._model.hypotheses(applied))
+            view = self._model.hypotheses_view()
+        applied = max(1, min(limit, self.hypothesis_objects // objects))
+        counts = {
+            "total": view.hypothesis_count,
+            "clusters": view.cluster_count,
+            "log10_joint": view.log10_joint_hypotheses,
+            "limit": applied,
+        }
+        return counts, view.best(applied)
 
     def health(self) -> dict[str, Any]:
         """A summary of the world as of the last commit; never waits for the lock."""

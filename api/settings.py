@@ -118,6 +118,15 @@ class Settings(BaseSettings):
     max_waiting
         Writes waiting for the world beyond which a new one is answered 503 with
         ``Retry-After`` at once (the service fell behind; docs/api.md, "Overload").
+    replay_limit
+        The share of the last second the world may spend replaying scans (0-1) above
+        which the service is behind: a late scan is then refused (409) instead of
+        replayed (1: always replayed; docs/api.md, "Overload").
+    max_streams, max_client_streams
+        ``GET /world/stream`` responses open at once, in all and per client (peer
+        address); one more is refused with ``Retry-After``: 503 beyond the first,
+        429 beyond the second (each holds a connection slot for up to
+        ``stream_lifetime``).
     stream_lifetime, stream_send_timeout
         A ``GET /world/stream`` ends after ``stream_lifetime`` s (an ``EventSource``
         reconnects by itself); a client that does not read one frame for
@@ -177,6 +186,9 @@ class Settings(BaseSettings):
     timeout_request: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 10.0
     max_client_connections: Annotated[int, Field(ge=1)] = 128
     max_waiting: Annotated[int, Field(ge=1)] = 64
+    replay_limit: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] = 0.1
+    max_streams: Annotated[int, Field(ge=1)] = 64
+    max_client_streams: Annotated[int, Field(ge=1)] = 8
     stream_lifetime: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 3600.0
     stream_send_timeout: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 10.0
     http: Literal["auto", "h11", "httptools"] = "auto"

@@ -15,9 +15,13 @@ After the fault the journal is read offline and compared with the client's recor
 4. Connection flood: one client holds 300 connections; probes of ``/health`` and
    ``/ready`` (and a read of another client) must be answered.
 5. Overload: 12 writers at once against ``--max-waiting 4``: answers 200, 503 with
-   ``Retry-After`` (nothing applied), and what the journal kept.
+   ``Retry-After`` (nothing applied), and what the journal kept. Then the team's
+   load (5 robots x 10 det x 30 Hz) with one core taken by another process, robots
+   that queue late frames and robots that drop them (``bench_teamload.overload_run``,
+   in memory): it must not storm (the robots end within 1 s of their schedule, and
+   the service replays fewer scans than it acknowledges).
 
-    python benchmarks/bench_faults.py [--kills 5] [--seed 0]
+    python benchmarks/bench_faults.py [--kills 5] [--seed 0] [--team-seconds 20]
 
 Must read: nothing acknowledged lost, nothing refused kept, every damage reported.
 Writes benchmarks/out/faults.{json,md}.
@@ -450,6 +454,35 @@ def overload(work: Path) -> Row:
     )
 
 
+def team_overload(seconds: float) -> list[Row]:
+    """The team's load with one core taken (:func:`bench_teamload.overload_run`)."""
+    from bench_teamload import LATE_MODES, overload_run
+
+    rows = []
+    for late in LATE_MODES:
+        r = overload_run(seconds, late)
+        answers = r["answers"]
+        refused = sum(n for status, n in answers.items() if status not in ("200", "dropped"))
+        share = ", ".join(f"{s} {100 * v:.1f} %" for s, v in r["share"].items())
+        verdict = "NO: it storms" if r["storms"] else "sheds, no storm"
+        rows.append(
+            Row(
+                f"overload: team load, one core taken, robots {late} late frames",
+                f"5 robots x 10 det x 30 Hz for {seconds:g} s, a busy loop on one core",
+                answers.get("200", 0),
+                refused,
+                0,
+                0,
+                f"{verdict}: {r['replayed_scans']:.0f} scans replayed, behind "
+                f"{r['behind_schedule_s']} s at the end",
+                f"{r['acknowledged_det_per_s']:.0f} det/s acknowledged of 1,500; {share}; "
+                f"late dropped {r['dropped_by_service']} / skipped {r['skipped_by_clients']}; "
+                f"POST p99 {r['post_ms']['p99']} ms; in memory (no journal compared)",
+            )
+        )
+    return rows
+
+
 # -- the run --------------------------------------------------------------------------------------
 
 
@@ -474,12 +507,20 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--kills", type=int, default=5)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--team-seconds",
+        type=float,
+        default=20.0,
+        help="length of each team overload run with one core taken (0: skip them)",
+    )
     args = parser.parse_args(argv)
     rng = random.Random(args.seed)
     with tempfile.TemporaryDirectory(prefix="semwm-faults-") as tmp:
         work = Path(tmp)
         rows = [kills(work, args.kills, rng), full_disk(work), *damaged(work), flood(work),
                 overload(work)]  # fmt: skip
+    if args.team_seconds > 0:
+        rows += team_overload(args.team_seconds)
     text = table(rows)
     print(text)
     out = HERE / "out"

@@ -1418,6 +1418,59 @@ class WorldModel:
         return Confidence(value, state_of(value, spec))
 
     def hypotheses(self, k: int = 10) -> list[HypothesisSummary]:
+        """The ``k`` most probable hypotheses with their probabilities and objects:
+        :meth:`HypothesesView.best` of :meth:`hypotheses_view`."""
+        if k < 1:
+            raise ValueError(f"k must be at least 1; got {k}")
+        return self.hypotheses_view().best(k)
+
+    def hypotheses_view(self) -> HypothesesView:
+        """What :meth:`hypotheses` reads, taken now: the state (immutable: a scan makes
+        a new one) and a copy of the public ids. Held scans (:attr:`hold`) are
+        included, as in every query. Its :meth:`HypothesesView.best` does the search
+        and builds the answer without the model, so a service takes the view under
+        its lock and does the rest after (issue 30: a read never holds the world
+        longer than a scan)."""
+        if self._pending:  # every accepted detection included, nothing committed
+            with self._including_pending():
+                view = self.hypotheses_view()
+            return replace(view, committed=self._state)
+        return HypothesesView(
+            self._state, dict(self._ids), self._knowledge.world.dimension, self._state
+        )
+
+
+@dataclass(frozen=True)
+class HypothesesView:
+    """The hypotheses of a world model at one moment (:meth:`WorldModel.hypotheses_view`).
+
+    ``state`` is the MHF state queries answer from (held scans included),
+    ``committed`` the processed one the counts are of (they are the same without a
+    hold); both are immutable, and ``ids`` (lineage -> public id) is this view's own
+    copy, so nothing the model does later changes the view.
+    """
+
+    state: MHFState
+    ids: Mapping[int, int]
+    dimension: int
+    committed: MHFState
+
+    @property
+    def hypothesis_count(self) -> int:
+        """:attr:`WorldModel.hypothesis_count` at the view's moment."""
+        return self.committed.hypothesis_count
+
+    @property
+    def cluster_count(self) -> int:
+        """:attr:`WorldModel.cluster_count` at the view's moment."""
+        return len(self.committed.clusters)
+
+    @property
+    def log10_joint_hypotheses(self) -> float:
+        """:attr:`WorldModel.log10_joint_hypotheses` at the view's moment."""
+        return self.committed.log10_joint_count
+
+    def best(self, k: int = 10) -> list[HypothesisSummary]:
         """The ``k`` most probable hypotheses with their probabilities and objects.
 
         k-best of the product of the clusters' sorted hypothesis lists, best first. A
@@ -1434,11 +1487,8 @@ class WorldModel:
         """
         if k < 1:
             raise ValueError(f"k must be at least 1; got {k}")
-        if self._pending:  # every accepted detection included, nothing committed
-            with self._including_pending():
-                return self.hypotheses(k)
-        state = self._state
-        dim = self._knowledge.world.dimension
+        state = self.state
+        dim = self.dimension
         best = state.best
         steps = [
             (c.hypotheses[0].log_weight - c.hypotheses[1].log_weight, index)
@@ -1484,7 +1534,7 @@ class WorldModel:
                     x = positions[key] = tuple(float(v) for v in _summary_position(track, dim)[0])
                 objects.append(
                     HypothesisObject(
-                        id=self._ids.get(track.lineage),
+                        id=self.ids.get(track.lineage),
                         track=track.lineage,
                         cls=track.cls,
                         label=track.label,

@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, StreamingResponse
-from starlette.types import Send
+from starlette.types import Receive, Scope, Send
 
 from api.deps import SettingsDep
-from api.feed import WorldFeed
+from api.feed import StreamSlots, WorldFeed
+from api.schemas import MessageOut
 
 logger = logging.getLogger("api")
 
@@ -43,9 +44,13 @@ def live_page() -> FileResponse:
     "/world/stream",
     summary="The world, pushed as Server-Sent Events",
     response_class=StreamingResponse,
-    responses={200: {"content": {"text/event-stream": {}}, "description": "An endless stream"}},
+    responses={
+        200: {"content": {"text/event-stream": {}}, "description": "An endless stream"},
+        429: {"model": MessageOut, "description": "This client holds --max-client-streams"},
+        503: {"model": MessageOut, "description": "The service serves --max-streams"},
+    },
 )
-async def world_stream(feed: FeedDep, settings: SettingsDep) -> StreamingResponse:
+async def world_stream(request: Request, feed: FeedDep, settings: SettingsDep) -> StreamingResponse:
     """Server-Sent Events: ``knowledge`` first, then ``world`` after every change.
 
     ``world`` carries the whole world as ``GET /world`` does, plus ``hypotheses``,
@@ -53,8 +58,13 @@ async def world_stream(feed: FeedDep, settings: SettingsDep) -> StreamingRespons
     event; at most 10 per second. ``stats`` comes every 2 s while nothing changes.
     Read it with ``curl -N``, a browser's ``EventSource`` or any SSE client; the
     format is in docs/api.md. A stream ends after ``--stream-lifetime`` (reconnect),
-    and a client that stops reading is dropped after ``--stream-send-timeout``.
+    and a client that stops reading is dropped after ``--stream-send-timeout``. At
+    most ``--max-streams`` are open at once (one more: 503) and
+    ``--max-client-streams`` per client address (429), both with ``Retry-After``.
     """
+    slots: StreamSlots = request.app.state.stream_slots
+    client = request.client.host if request.client is not None else ""
+    slots.take(client)
 
     async def frames() -> AsyncIterator[str]:
         async with feed.subscribe() as queue:
@@ -65,6 +75,7 @@ async def world_stream(feed: FeedDep, settings: SettingsDep) -> StreamingRespons
         frames(),
         lifetime=settings.stream_lifetime,
         send_timeout=settings.stream_send_timeout,
+        ended=lambda: slots.give(client),
         media_type="text/event-stream",
         headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
     )
@@ -80,11 +91,26 @@ class BoundedStream(StreamingResponse):
     """
 
     def __init__(
-        self, content: AsyncIterator[str], *, lifetime: float, send_timeout: float, **options: Any
+        self,
+        content: AsyncIterator[str],
+        *,
+        lifetime: float,
+        send_timeout: float,
+        ended: Callable[[], None] | None = None,
+        **options: Any,
     ) -> None:
         super().__init__(content, **options)
         self.lifetime = lifetime
         self.send_timeout = send_timeout
+        self.ended = ended
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """The response; ``ended`` is called however it ends (its slot is given back)."""
+        try:
+            await super().__call__(scope, receive, send)
+        finally:
+            if self.ended is not None:
+                self.ended()
 
     async def stream_response(self, send: Send) -> None:
         await send(

@@ -142,7 +142,7 @@ def add_persistence_options(parser: argparse.ArgumentParser) -> None:
 SAFETY_OPTIONS = (
     "token", "token_file", "read_token", "insecure", "cors_origins", "allowed_hosts",
     "max_body", "max_sources", "stuck_after", "max_client_connections", "stream_lifetime",
-    "stream_send_timeout", "max_waiting",
+    "stream_send_timeout", "max_waiting", "replay_limit", "max_streams", "max_client_streams",
 )  # fmt: skip
 
 
@@ -180,6 +180,14 @@ def add_safety_options(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument("--stream-lifetime", type=float, help="s before a /world/stream ends (3600)")
     group.add_argument(
+        "--max-streams", type=int, help="/world/stream responses open at once; one more: 503 (64)"
+    )
+    group.add_argument(
+        "--max-client-streams",
+        type=int,
+        help="/world/stream responses one client address may hold; one more: 429 (8)",
+    )
+    group.add_argument(
         "--stream-send-timeout",
         type=float,
         help="s a /world/stream client may read nothing before it is dropped (10)",
@@ -188,6 +196,12 @@ def add_safety_options(parser: argparse.ArgumentParser) -> None:
         "--max-waiting",
         type=int,
         help="writes waiting for the world beyond which new ones get 503 + Retry-After (64)",
+    )
+    group.add_argument(
+        "--replay-limit",
+        type=float,
+        help="share of the last second the world may spend replaying before late scans are "
+        "refused (409) instead of replayed (0.1; 1: always replay)",
     )
 
 

@@ -9,6 +9,7 @@ These tests time nothing: they count the work.
 from __future__ import annotations
 
 import heapq
+import json
 from typing import Any
 
 import pytest
@@ -132,3 +133,54 @@ def test_the_limit_applied_keeps_the_answer_bounded_in_objects() -> None:
         assert sum(len(h["objects"]) for h in answer["hypotheses"]) <= 1000 + objects
         small = client.get("/hypotheses", params={"limit": 2}).json()
         assert small["limit"] == 2 and len(small["hypotheses"]) == 2
+
+
+def test_a_hypotheses_read_searches_and_builds_nothing_under_the_worlds_lock(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A read never holds the world's lock longer than a scan: under it GET /hypotheses
+    only takes the state (immutable) and a copy of the ids. Counted while the lock is
+    held: heap pushes of the k-best search, object positions and hypothesis objects
+    built. Before, all of them (the answer of limit=1000, up to 100,000 objects)."""
+    import semwm.world
+
+    model = _ambiguous_world(120)
+    expected = [h.to_dict() for h in model.hypotheses(100)]
+    service = WorldService(model)
+    work: dict[str, dict[str, int]] = {"under": {}, "outside": {}}
+
+    def counted(name: str, function: Any) -> Any:
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            where = work["under" if service._lock.locked() else "outside"]
+            where[name] = where.get(name, 0) + 1
+            return function(*args, **kwargs)
+
+        return wrapper
+
+    monkeypatch.setattr(heapq, "heappush", counted("heap pushes", heapq.heappush))
+    for name in ("_summary_position", "HypothesisObject", "HypothesisSummary"):
+        monkeypatch.setattr(semwm.world, name, counted(name, getattr(semwm.world, name)))
+    with TestClient(make_app(service)) as client:
+        answer = client.get("/hypotheses", params={"limit": 100}).json()
+    assert answer["hypotheses"] == json.loads(json.dumps(expected))
+    assert answer["total"] == 240 and answer["clusters"] == 120
+    assert work["under"] == {}, f"work done under the world's lock: {work['under']}"
+    assert work["outside"]["heap pushes"] >= 100
+    assert work["outside"]["HypothesisSummary"] == 100
+    assert work["outside"]["HypothesisObject"] == sum(len(h["objects"]) for h in expected)
+
+
+def test_a_hypotheses_view_is_not_changed_by_later_scans() -> None:
+    """The view a read takes under the lock is answered after it is released, while
+    scans go on: it refers only to immutable state and its own copy of the ids."""
+    model = _ambiguous_world(12)
+    view = model.hypotheses_view()
+    before = [h.to_dict() for h in view.best(50)]
+    counts = (view.hypothesis_count, view.cluster_count, view.log10_joint_hypotheses)
+    model.ingest(
+        [{"time": 1.0, "class": "Cup", "position": [1.0 + 3.0 * i, 1.3]} for i in range(6)]
+    )
+    model.ingest([{"time": 1.5, "class": "Cup", "position": [150.0, 150.0]}])
+    assert [h.to_dict() for h in model.hypotheses(50)] != before  # the world moved on
+    assert [h.to_dict() for h in view.best(50)] == before
+    assert (view.hypothesis_count, view.cluster_count, view.log10_joint_hypotheses) == counts

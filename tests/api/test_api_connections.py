@@ -157,3 +157,50 @@ def test_a_stream_client_that_does_not_read_is_dropped() -> None:
     took = asyncio.run(run())
     assert 0.15 < took < 2.0
     assert len(sent) == 4 and sent[-1].get("more_body") is True  # never finished
+
+
+@contextlib.contextmanager
+def _stream(url: str, source: str) -> Iterator[httpx.Response]:
+    """A ``GET /world/stream`` from ``source`` whose first frame came (or its refusal)."""
+    transport = httpx.HTTPTransport(local_address=source)
+    with (
+        httpx.Client(base_url=url, timeout=10, transport=transport) as client,
+        client.stream("GET", "/world/stream") as response,
+    ):
+        chunks = response.iter_bytes()  # kept: a dropped iterator closes the response
+        if response.status_code == 200:
+            next(chunks)  # the knowledge event: the stream is open
+        else:
+            response.read()
+        yield response
+
+
+def test_streams_are_bounded_in_all_and_per_client_with_retry_after() -> None:
+    """``/world/stream`` is open without --read-token, as ``/world`` is (reads are open
+    by design on a loopback service), so its number is bounded instead: each one holds
+    a connection slot for up to an hour. One more than --max-client-streams from a
+    client is 429, one more than --max-streams in all is 503, both with Retry-After;
+    a stream that ends gives its slot back, and the probes and reads go on."""
+    settings = Settings(knowledge=SIM1, port=0, max_streams=3, max_client_streams=2)
+    with running_server(settings) as url, contextlib.ExitStack() as streams:
+        for _ in range(2):
+            assert streams.enter_context(_stream(url, "127.0.0.1")).status_code == 200
+        with _stream(url, "127.0.0.1") as third:
+            assert third.status_code == 429 and third.headers["retry-after"] == "5"
+            assert "--max-client-streams 2" in third.json()["detail"]
+        other = contextlib.ExitStack()
+        assert other.enter_context(_stream(url, "127.0.0.2")).status_code == 200
+        with _stream(url, "127.0.0.3") as beyond:
+            assert beyond.status_code == 503 and beyond.headers["retry-after"] == "5"
+            assert "--max-streams 3" in beyond.json()["detail"]
+        _all_probes_answer(url, "127.0.0.3", rounds=2)
+        assert _probe(url, "/world", "127.0.0.3") == 200
+        other.close()  # 127.0.0.2's stream ends: its slot is free again
+        deadline = time.monotonic() + 5.0
+        while True:
+            with _stream(url, "127.0.0.3") as again:
+                if again.status_code == 200:
+                    break
+                assert again.status_code == 503
+            assert time.monotonic() < deadline, "an ended stream kept its slot"
+            time.sleep(0.1)

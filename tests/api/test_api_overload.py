@@ -9,6 +9,7 @@ replayed, and :class:`semwm.client.Client` waits ``Retry-After`` with jitter.
 
 from __future__ import annotations
 
+import math
 import random
 import threading
 import time
@@ -133,3 +134,75 @@ def test_the_client_waits_retry_after_with_jitter_then_gives_up() -> None:
     client._last_used = time.monotonic()
     with pytest.raises(Exception, match="503"):
         client.post_detections([cup(2.0, "r1")])
+
+
+def test_while_replays_take_the_service_s_time_a_late_scan_is_refused_not_replayed(
+    client: TestClient, service: WorldService, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The storm of case 9 measured again (benchmarks/bench_teamload.py --overload):
+    robots that queue late frames, one core taken, 14,991 scans replayed in a 30 s run
+    and 365 det/s acknowledged of 1,500. Each late scan replays every later one, so under
+    load the replays feed themselves. Behind (replays took more than replay_limit of
+    the last second), a late scan is a 409 at once, nothing applied, counted late."""
+    for t, source in ((10.0, "r1"), (10.2, "r2")):
+        assert client.post("/detections", json=cup(t, source)).status_code == 200
+    before = snapshot(client)
+    monkeypatch.setattr(WorldService, "replay_share", lambda self, now=None: 0.3)
+    late = client.post("/detections", json=cup(10.1, "r1"))
+    assert late.status_code == 409, late.text
+    assert "behind" in late.json()["detail"] and "30 %" in late.json()["detail"]
+    assert snapshot(client) == before
+    assert service.stats()["replayed_scans"] == 0 and service.shed_late == 1
+    r1 = next(s for s in client.get("/sources").json()["sources"] if s["name"] == "r1")
+    assert r1["late"] == 1
+    # a scan in order is applied as ever, behind or not
+    assert client.post("/detections", json=cup(10.3, "r1")).status_code == 200
+    # a source that asked for it has its late scans dropped (200), as before
+    assert client.put("/sources/r3/policy", json={"late": "drop"}).status_code == 200
+    dropped = client.post("/detections", json=cup(10.25, "r3"))
+    assert dropped.status_code == 200 and dropped.headers["x-semwm-dropped"] == "late"
+    # no longer behind: the late scan is replayed, and the replay is metered
+    monkeypatch.setattr(WorldService, "replay_share", lambda self, now=None: 0.05)
+    assert client.post("/detections", json=cup(10.25, "r4")).status_code == 200
+    assert service.stats()["replayed_scans"] == 1
+    monkeypatch.undo()
+    assert service.replay_share() > 0.0
+
+
+class _Clock:
+    """``time`` for api.service with a monotonic clock the test moves."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def monotonic(self) -> float:
+        return self.now
+
+
+def test_the_replay_share_is_the_time_spent_replaying_weighted_over_a_second(
+    service: WorldService, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """u(t) = (1/tau) int r(s) exp(-(t - s)/tau) ds, tau = replay_window: replaying all
+    the time it tends to 1, a fifth of the time to about 0.2, idle it decays."""
+    import api.service
+
+    clock = _Clock()
+    monkeypatch.setattr(api.service, "time", clock)
+    service._replaying, service._replaying_at = 0.0, clock.now
+
+    def replay(seconds: float) -> None:
+        clock.now += seconds
+        service._count_replay(seconds)
+
+    replay(0.5)
+    assert service.replay_share() == pytest.approx(1.0 - math.exp(-0.5))
+    clock.now += 10.0
+    for _ in range(500):  # 2 ms of every 10 ms for 5 s
+        replay(0.002)
+        clock.now += 0.008
+    assert service.replay_share() == pytest.approx(0.2, abs=0.01)
+    for _ in range(500):  # all the time for 5 s
+        replay(0.01)
+    assert service.replay_share() == pytest.approx(1.0, abs=0.01)
+    clock.now += 3.0  # no replay for 3 s
+    assert service.replay_share() == pytest.approx(math.exp(-3.0), abs=0.01)
