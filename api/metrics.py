@@ -106,6 +106,15 @@ class WorldCollector(Collector):
              0 if lost is None else lost[1] - lost[0] + 1),
             ("store_write_refusals", "Writes refused since start because the store could "
              "not write (a full disk)", service.storage_refusals),
+            ("writes_shed", "Writes answered 503 since start because more than "
+             "--max-waiting were queued for the world", service.shed),
+            ("late_scans_refused_behind", "Late scans answered 409 since start instead of "
+             "replayed, because replays took more than --replay-limit of the service's "
+             "time (docs/operations.md, overload)", service.shed_late),
+            ("late_scans_dropped", "Late scans dropped since start for sources whose "
+             "policy is late: drop", service.dropped_late),
+            ("replay_share", "Share of the last second the world spent replaying scans "
+             "(above --replay-limit late scans are refused)", service.replay_share()),
         ]  # fmt: skip
         if stats["time"] is not None:
             gauges.append(("world_time_seconds", "Latest accepted detection time", stats["time"]))

@@ -44,6 +44,7 @@ def test_a_full_queue_for_the_world_sheds_new_writes_with_retry_after(
     monkeypatch.undo()
     assert snapshot(client) == before
     assert service.shed == 2
+    assert "semwm_writes_shed 2.0" in client.get("/metrics").text
     assert client.post("/detections", json=cup(1.5, "r1")).status_code == 200
 
 
@@ -165,6 +166,10 @@ def test_while_replays_take_the_service_s_time_a_late_scan_is_refused_not_replay
     monkeypatch.setattr(WorldService, "replay_share", lambda self, now=None: 0.05)
     assert client.post("/detections", json=cup(10.25, "r4")).status_code == 200
     assert service.stats()["replayed_scans"] == 1
+    metrics = client.get("/metrics").text
+    assert "semwm_late_scans_refused_behind 1.0" in metrics
+    assert "semwm_late_scans_dropped 1.0" in metrics
+    assert "semwm_replay_share 0.05" in metrics
     monkeypatch.undo()
     assert service.replay_share() > 0.0
 
