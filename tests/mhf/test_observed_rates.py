@@ -12,6 +12,7 @@ from semwm import WorldModel
 from semwm.knowledge.loader import knowledge_from_text
 from semwm.mhf.rates import (
     DISCOUNT,
+    PRIOR_COUNTS,
     WINDOW_DETECTIONS,
     ObservedRates,
     ScanCoverage,
@@ -220,12 +221,14 @@ def test_a_stream_counts_each_class_at_its_own_rate_from_the_knowledges_prior() 
     # a class the stream has not counted yet: no rate of its own (the class rate holds)
     assert rates.rate(stream, "Can", 2.0) == 0.0
     # the prior's mean is the knowledge's per-scan probability, 0.5 Hz x 0.4 s: a table
-    # started, detected again, then missed: (0 hits + 2 x 0.2) / (1 expected + 2) per scan
+    # started, detected again, then missed: (0 hits + n x 0.2) / (1 expected + n) per scan,
+    # n the prior's pseudo-counts
     table_ = {1: "Table"}
     first = ObservedRates().after_scan("c", 0.0, {}, {"camera": [1]}, {1}, classes=table_)
     first = first.after_scan("c", 0.4, {"camera": [1]}, {}, {1}, classes=table_)
     first = first.after_scan("c", 0.8, {}, {}, {1}, classes=table_)
-    assert first.rate(("c", "camera"), "Table", 0.5) == pytest.approx((2 * 0.2 / 3) / 0.4)
+    n = PRIOR_COUNTS
+    assert first.rate(("c", "camera"), "Table", 0.5) == pytest.approx((n * 0.2 / (1 + n)) / 0.4)
 
 
 def test_a_lineage_a_stream_started_and_never_saw_again_is_no_miss() -> None:
