@@ -477,6 +477,44 @@ def run(
     return doc
 
 
+def with_peers_from(doc: dict[str, Any], committed: dict[str, Any]) -> dict[str, Any]:
+    """``doc`` (a run of some trackers) with the other trackers' rows of ``committed``
+    (an earlier run on the same seeds and sizes) for every scenario both hold; each
+    scenario's summary, target and view checks made again from the joined rows. A
+    Stone Soup tracker's rows do not depend on semwm's code, and its scenarios are
+    made from the seed alone: ``--keep-peers`` reruns semwm only (20 minutes less on
+    this machine) and says where the peers' rows come from (``peers_from``)."""
+    if committed.get("seeds") != doc["seeds"] or committed.get("quick") != doc["quick"]:
+        raise SystemExit(
+            "--keep-peers: the committed results were run on other seeds or sizes "
+            f"(seeds {committed.get('seeds')}, quick {committed.get('quick')}); run every tracker"
+        )
+    joined = {**doc, "peers_from": committed.get("peers_from") or committed["machine"]}
+    scenarios = {}
+    for name, entry in doc["scenarios"].items():
+        old = committed["scenarios"].get(name)
+        if old is None:
+            scenarios[name] = entry
+            continue
+        runs = {**{t: r for t, r in old["runs"].items() if t not in entry["runs"]}}
+        runs.update(entry["runs"])
+        by_tracker = {t: runs[t] for t in TRACKERS if t in runs}
+        summary = {t: summarise(r) for t, r in by_tracker.items()}
+        scenarios[name] = {
+            **entry,
+            "summary": summary,
+            "target": target(summary, by_tracker, entry["unobserved_floor"]),
+            "view_checks": None
+            if entry["view_checks"] is None
+            else {t: view_summary(r) for t, r in by_tracker.items()},
+            "runs": by_tracker,
+        }
+    for name, old in committed["scenarios"].items():  # scenarios not run now: as they were
+        scenarios.setdefault(name, old)
+    joined["scenarios"] = {n: scenarios[n] for n in CONFIGS if n in scenarios}
+    return joined
+
+
 # --------------------------------------------------------------------------- markdown
 
 
@@ -503,6 +541,16 @@ def markdown(doc: dict[str, Any]) -> str:
         f"Python {m['python']}, {m['date']}, commit {m.get('commit')}; versions: "
         + ", ".join(f"{k} {v}" for k, v in m["versions"].items()),
         "",
+        *(
+            [
+                f"The Stone Soup rows come from an earlier run of the same seeds and sizes "
+                f"({doc['peers_from']['date']}, commit {doc['peers_from'].get('commit')}; "
+                "`--keep-peers`: their code did not change); semwm's are this run's.",
+                "",
+            ]
+            if doc.get("peers_from")
+            else []
+        ),
         f"Seeds {doc['seeds'][0]}..{doc['seeds'][-1]} ({len(doc['seeds'])})"
         f"{', quick sizes' if doc['quick'] else ''}; {doc['jobs']} process(es); "
         f"wall time {doc['wall_s']:.0f} s. GOSPA: alpha 2, p 1, the scenario's c, mean over "
@@ -652,7 +700,15 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         action="store_true",
         help="also copy the results into the committed benchmarks/results/",
     )
+    parser.add_argument(
+        "--keep-peers",
+        action="store_true",
+        help="with --trackers semwm: join the committed results' Stone Soup rows (same "
+        "seeds and sizes; their code did not change) and every scenario not run now",
+    )
     args = parser.parse_args(argv)
+    if args.keep_peers and "semwm" not in args.trackers:
+        parser.error("--keep-peers joins a run of semwm with the committed peers' rows")
     if args.seeds < 1:
         parser.error(f"--seeds must be at least 1; got {args.seeds}")
     doc = run(
@@ -663,8 +719,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         limit=args.time_limit,
         trackers=args.trackers,
     )
-    text = markdown(doc)
     stem = "quality_quick" if args.quick else "quality"
+    if args.keep_peers:
+        doc = with_peers_from(doc, json.loads((RESULTS / f"{stem}.json").read_text()))
+    text = markdown(doc)
     args.out.mkdir(parents=True, exist_ok=True)
     paths = [args.out / f"{stem}.json", args.out / f"{stem}.md"]
 
