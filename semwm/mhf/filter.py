@@ -395,6 +395,7 @@ class MultipleHypothesisFilter:
             alive = [i for i, k in enumerate(keys) if k not in gone]
             predicted = predicted.subset(alive)
         settle = self._settleable(clusters) if view is None else None
+        out_of_view: frozenset[int] = frozenset()  # lineages a view did not hold
         options = self.associator.options(
             predicted,
             measurements,
@@ -430,6 +431,13 @@ class MultipleHypothesisFilter:
             )
             table.existence.update(r_view)
             clusters = self.undetected(clusters, log_q_view, table.tracks)
+            # an object the view did not hold had no chance to be detected again
+            held = self.kernels.in_view_probability(
+                predicted.position, predicted.position_covariance, view, None
+            )
+            out_of_view = frozenset(
+                t.lineage for t, c in zip(predicted.tracks, held.tolist(), strict=True) if c < 0.5
+            )
         final = self._expand_scan(clusters, options, table)
         if self.merge_distance > 0.0:
             untouched = {id(c) for c in clusters}
@@ -441,6 +449,7 @@ class MultipleHypothesisFilter:
         if (self.observed_rates or self.missed_detections) and (measurements or view):
             observed = self._observe(
                 observed,
+                out_of_view,
                 state.tracks,
                 options,
                 final,
@@ -582,6 +591,7 @@ class MultipleHypothesisFilter:
     @staticmethod
     def _observe(
         observed: ObservedRates,
+        out_of_view: frozenset[int],
         before: Mapping[int, Track],
         options: Sequence[DetectionOptions | SettledUpdate],
         final: Sequence[Cluster],
@@ -628,7 +638,16 @@ class MultipleHypothesisFilter:
         first = options[0].measurement if options else None
         sensor = None if first is None or first.sensor is None else tuple(first.sensor.tolist())
         return observed.after_scan(
-            source, time, detected, born, alive, sensor, classes, born_elsewhere, scanned
+            source,
+            time,
+            detected,
+            born,
+            alive,
+            sensor,
+            classes,
+            born_elsewhere,
+            scanned,
+            out_of_view,
         )
 
     def _scanner(

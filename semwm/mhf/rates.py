@@ -428,6 +428,7 @@ class ObservedRates:
         classes: Mapping[int, str] | None = None,
         born_elsewhere: Mapping[str, Iterable[int]] | None = None,
         scanned: Collection[str] | None = None,
+        out_of_view: Collection[int] = frozenset(),
     ) -> ObservedRates:
         """The rates after one scan of ``source`` at ``time``.
 
@@ -445,7 +446,9 @@ class ObservedRates:
         that made the scan (``None``: every detector of the source); only their
         streams count what they missed (a scan of the source's laser is no miss of
         its camera; an empty scan with a sensor view is a miss of everything its
-        detector had detected).
+        detector had detected). ``out_of_view``: lineages the scan's sensor view did
+        not hold (an object the robot turned away from had no chance to be detected
+        again: not a miss of its stream's recall).
         """
         sources = dict(self.sources)
         clock = sources.get(source)
@@ -480,7 +483,7 @@ class ObservedRates:
             # a hit is any detection of the object by the stream, whatever class it now has
             every = frozenset(detected.get(detector, ()))
             now = frozenset(lineage for lineage in every if class_of(lineage) == cls)
-            expected = old.detected & alive
+            expected = (old.detected & alive) - frozenset(out_of_view)
             kept = DISCOUNT ** len(expected)  # forget by evidence, not by time
             streams[key] = StreamCounts(
                 kept * old.hits + len(expected & every),

@@ -353,3 +353,15 @@ def test_an_outlier_that_only_a_less_likely_hypothesis_calls_an_object_is_soon_g
     assert started and max(started) < 0.5  # kept, unpublished, by some hypothesis
     later = team_stream(True, 1.4, replace_the_first_cup)[0]
     assert _outlier_versions(later, outlier) == []  # gone 0.4 s later
+
+
+def test_an_object_the_view_did_not_hold_is_no_chance_to_detect_it_again() -> None:
+    # a robot turns away from a cup it detected: the next scan's view does not hold the
+    # cup, so not detecting it says nothing of the camera's recall
+    classes = {1: "Cup"}
+    rates = ObservedRates().after_scan("r", 0.0, {}, {"camera": [1]}, {1}, classes=classes)
+    rates = rates.after_scan("r", 0.1, {"camera": [1]}, {}, {1}, classes=classes)
+    turned = rates.after_scan("r", 0.2, {}, {}, {1}, classes=classes, out_of_view={1})
+    assert turned.streams[("r", "camera", "Cup")].expected == 0.0
+    looked = rates.after_scan("r", 0.2, {}, {}, {1}, classes=classes)
+    assert looked.streams[("r", "camera", "Cup")].expected == 1.0
