@@ -49,6 +49,7 @@ from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.sim.scenarios import make_scenario
 from semwm.sim.team_run import Network, run_team
+from semwm.team import CONTINUITY_PROBABILITY
 
 HERE = Path(__file__).parent
 LATENCY = (0.02, 0.15)
@@ -56,6 +57,7 @@ OFFSET = 3.0
 
 NO_DRIFT: dict[str, Any] = {"drift_gate": None}
 EVERY_SCAN: dict[str, Any] = {"drift_gate": None, "report_period": 1.0 / 30.0}
+KEEP: dict[str, Any] = {"continuity": CONTINUITY_PROBABILITY}
 
 CONFIGS: list[tuple[str, int, Network, str, dict[str, Any]]] = [
     ("flat ideal", 1, Network(0.0, LATENCY), "updated", {}),
@@ -71,6 +73,11 @@ CONFIGS: list[tuple[str, int, Network, str, dict[str, Any]]] = [
     ("2-level updated sync", 2, Network(OFFSET, LATENCY, sync=True), "updated", {}),
     ("2-level detections sync", 2, Network(OFFSET, LATENCY, sync=True), "detections", {}),
     ("2-level updated no sync", 2, Network(OFFSET, LATENCY, sync=False), "updated", {}),
+    ("2-level updated ideal, continuity", 2, Network(0.0, LATENCY), "updated", KEEP),
+    ("2-level detections ideal, continuity", 2, Network(0.0, LATENCY), "detections", KEEP),
+    ("2-level updated sync, continuity", 2, Network(OFFSET, LATENCY, sync=True), "updated", KEEP),
+    ("2-level detections sync, continuity", 2, Network(OFFSET, LATENCY, sync=True), "detections",
+     KEEP),
     ("flat ideal (hold)", 1, Network(0.0, LATENCY, receiver="hold"), "updated", {}),
     ("flat sync (hold)", 1, Network(OFFSET, LATENCY, sync=True, receiver="hold"), "updated", {}),
     ("2-level updated ideal (hold)", 2, Network(0.0, LATENCY, receiver="hold"), "updated", {}),
