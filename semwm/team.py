@@ -51,9 +51,13 @@ the first position sent, then each report as a position measurement with its
 covariance), predicted to now. The global model also fuses other robots' reports,
 so its view is no worse than the replica's and the rule errs towards sending.
 
-``benchmarks/bench_team.py`` measures them (docs/team.md has the figures); the
-local id of each reported object travels with the report as a hint
-(:attr:`Report.local_ids`) but the global MHF does not use it for association.
+``benchmarks/bench_team.py`` measures them (docs/team.md has the figures). The
+local id of each reported object travels with the report (:attr:`Report.local_ids`):
+the global side keeps a robot's report on the global object its local object went
+to before (:class:`Continuity`, on by default in :class:`TeamModel` and
+:func:`semwm.sim.team_run.run_team`, which also default to ``detections``: together
+the two-level configuration closest to flat, issue 28). :class:`LocalModel` keeps
+``updated`` as its default (the service's local models).
 
 Pure: times are arguments, nothing reads a clock.
 """
@@ -648,20 +652,20 @@ class TeamModel:
     knowledge
         Knowledge of the local models; the global one gets :func:`global_knowledge`.
     strategy
-        What local reports carry.
+        What local reports carry (default ``detections``).
     continuity
         A probability: the global model keeps a robot's report on the global object
-        its local object went to before (:class:`Continuity`); ``None``: every report
-        is associated afresh.
+        its local object went to before (:class:`Continuity`; default
+        :data:`CONTINUITY_PROBABILITY`); ``None``: every report is associated afresh.
     """
 
     def __init__(
         self,
         knowledge: Knowledge,
-        strategy: Strategy | str = Strategy.UPDATED,
+        strategy: Strategy | str = Strategy.DETECTIONS,
         *,
         reorder_window: float = 0.0,
-        continuity: float | None = None,
+        continuity: float | None = CONTINUITY_PROBABILITY,
     ) -> None:
         self.knowledge = knowledge
         self.strategy = Strategy(strategy)

@@ -57,7 +57,13 @@ from semwm.sim.metrics import compute_metrics
 from semwm.sim.runner import RunResult, scans, taxonomy_of, truth_points, world_points
 from semwm.sim.scenarios import Scenario, TruthFrame
 from semwm.sources import SourceRegistry, TimeGuard
-from semwm.team import Continuity, LocalModel, Strategy, global_knowledge
+from semwm.team import (
+    CONTINUITY_PROBABILITY,
+    Continuity,
+    LocalModel,
+    Strategy,
+    global_knowledge,
+)
 from semwm.world import WorldModel
 from semwm.world_types import WorldState
 
@@ -153,13 +159,13 @@ def run_team(
     *,
     levels: int = 1,
     network: Network | None = None,
-    strategy: Strategy | str = Strategy.UPDATED,
+    strategy: Strategy | str = Strategy.DETECTIONS,
     report_period: float = 0.1,
     drift_gate: float | None = 0.95,
     seed: int = 0,
     gospa_c: float | None = None,
     horizon: float | None = None,
-    continuity: float | None = None,
+    continuity: float | None = CONTINUITY_PROBABILITY,
 ) -> TeamRun:
     """Play ``scenario`` through a flat (``levels=1``) or two-level team.
 
@@ -170,8 +176,10 @@ def run_team(
     view with the local estimate (:meth:`~semwm.team.LocalModel.due`); by default the
     report period. ``continuity`` (two levels, a probability): the receiver keeps a
     robot's report on the global object its local object went to before
-    (:class:`semwm.team.Continuity` with this probability); ``None``: every report is
-    associated afresh."""
+    (:class:`semwm.team.Continuity` with this probability; by default
+    :data:`~semwm.team.CONTINUITY_PROBABILITY`); ``None``: every report is associated
+    afresh. The defaults, ``detections`` with continuity, are the two-level
+    configuration closest to flat (docs/team.md)."""
     if levels not in (1, 2):
         raise ValueError(f"levels must be 1 or 2; got {levels}")
     net = network or Network()
