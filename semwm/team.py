@@ -502,8 +502,25 @@ class Continuity:
     gate, the global model's ``gate_probability``): there the MHF's alternative is a
     new object, the duplicate; among close objects it decides as before, and a
     memory that went stale where robots crowd (local or global ids swapped) does not
-    pull a report away from the object that fits it. Nothing in the MHF changes, so
-    both engines run it.
+    pull a report away from the object that fits it. At most ``patience`` reports in a
+    row of one local object are widened: one still off at its next report is another
+    object (two robots close together), not forced onto the first. Nothing in the MHF
+    changes, so both engines run it.
+
+    Parameters
+    ----------
+    dimension
+        The world's dimension (the chi-square quantiles' degrees of freedom).
+    probability
+        The gate a widened report is brought to the edge of.
+    others
+        The gate within which another global object could take a report (the global
+        knowledge's ``gate_probability``); ``None``: widen whatever the others.
+    patience
+        Widened reports in a row per local object.
+
+    The memory holds one entry per local object ever reported (local ids are not
+    reused); it is not pruned.
     """
 
     def __init__(
