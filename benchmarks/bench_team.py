@@ -90,6 +90,10 @@ CONFIGS: list[tuple[str, int, Network, str, dict[str, Any]]] = [
      {}),
     ("2-level detections sync (hold)", 2, Network(OFFSET, LATENCY, sync=True, receiver="hold"),
      "detections", {}),
+    ("2-level updated ideal (hold), no continuity", 2, Network(0.0, LATENCY, receiver="hold"),
+     "updated", AFRESH),
+    ("2-level detections ideal (hold), no continuity", 2, Network(0.0, LATENCY, receiver="hold"),
+     "detections", AFRESH),
 ]  # fmt: skip
 
 
