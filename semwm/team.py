@@ -51,15 +51,20 @@ the first position sent, then each report as a position measurement with its
 covariance), predicted to now. The global model also fuses other robots' reports,
 so its view is no worse than the replica's and the rule errs towards sending.
 
-``benchmarks/bench_team.py`` measures them (docs/team.md has the figures); the
-local id of each reported object travels with the report as a hint
-(:attr:`Report.local_ids`) but the global MHF does not use it for association.
+``benchmarks/bench_team.py`` measures them (docs/team.md has the figures). The
+local id of each reported object travels with the report (:attr:`Report.local_ids`):
+the global side keeps a robot's report on the global object its local object went
+to before (:class:`Continuity`, on by default in :class:`TeamModel` and
+:func:`semwm.sim.team_run.run_team`, which also default to ``detections``: together
+the two-level configuration closest to flat, issue 28). :class:`LocalModel` keeps
+``updated`` as its default (the service's local models).
 
 Pure: times are arguments, nothing reads a clock.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
@@ -68,7 +73,7 @@ from enum import StrEnum
 import numpy as np
 from scipy.special import chdtri
 
-from semwm.detection import Detection
+from semwm.detection import BeforeHistoryError, Detection
 from semwm.filters.factory import FilterFactory
 from semwm.knowledge.model import DetectorSpec, Knowledge
 from semwm.knowledge.resolve import resolve
@@ -392,6 +397,12 @@ class LocalModel:
         return item
 
 
+def _distance2(z: np.ndarray, R: np.ndarray, obj: WorldObject) -> float:
+    """Squared Mahalanobis distance of ``z`` (noise ``R``) from ``obj``'s position."""
+    delta = z - np.asarray(obj.position)
+    return float(delta @ np.linalg.solve(np.asarray(obj.covariance) + R, delta))
+
+
 def combine_detections(
     taken: Sequence[Taken], velocity: Sequence[float] | None, at: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -456,6 +467,200 @@ def _new_information(
     return z, (R + R.T) / 2.0
 
 
+CONTINUITY_PROBABILITY = 0.99
+"""The probability whose chi-square quantile a report of a robot's local object is
+brought within, against the global object it went to before (:class:`Continuity`)."""
+
+
+CONTINUITY_PATIENCE = 1
+"""How many reports in a row of one local object :class:`Continuity` widens: one that
+stays off the global object longer is another object."""
+
+
+class Continuity:
+    r"""The global side's memory of which global object each robot's local object went
+    to, and a report widened so that it goes there again.
+
+    The global MHF associates every report afresh: a robot's estimate that strays
+    (a turn, a few stray detections combined) falls outside the gate of the global
+    object it has fed so far and starts a duplicate, which the robot's later reports
+    keep alive (issue 28). The local id travels with the report
+    (:attr:`Report.local_ids`): :meth:`note` remembers, after the global model took a
+    report, which global object each ``(robot, local id)`` updated; :meth:`widen`,
+    before the next report is taken, widens the measurement noise of a report outside
+    the ``probability`` gate of that object along the offset only, just enough to
+    bring it to the gate's edge (Sherman-Morrison):
+
+    .. math:: R' = R + \Big(\frac{1}{\gamma} - \frac{1}{q}\Big)\,\delta\delta^\top,
+       \qquad q = \delta^\top (P_g + R)^{-1} \delta > \gamma,
+       \qquad \delta^\top (P_g + R')^{-1} \delta = \gamma
+
+    with ``δ`` the report's position minus the global object's, ``P_g`` its position
+    covariance, ``γ`` the chi-square quantile of ``probability``. The report then fits
+    the object it fed before, weighted less along the offset it disagrees in. Only a
+    report no other global object could take is widened (none within the ``others``
+    gate, the global model's ``gate_probability``): there the MHF's alternative is a
+    new object, the duplicate; among close objects it decides as before, and a
+    memory that went stale where robots crowd (local or global ids swapped) does not
+    pull a report away from the object that fits it. At most ``patience`` reports in a
+    row of one local object are widened: one still off at its next report is another
+    object (two robots close together), not forced onto the first. Nothing in the MHF
+    changes, so both engines run it.
+
+    Parameters
+    ----------
+    dimension
+        The world's dimension (the chi-square quantiles' degrees of freedom).
+    probability
+        The gate a widened report is brought to the edge of.
+    others
+        The gate within which another global object could take a report (the global
+        knowledge's ``gate_probability``); ``None``: widen whatever the others.
+    patience
+        Widened reports in a row per local object.
+
+    The memory holds one entry per local object ever reported (local ids are not
+    reused); it is not pruned.
+    """
+
+    def __init__(
+        self,
+        dimension: int,
+        probability: float = CONTINUITY_PROBABILITY,
+        others: float | None = 0.9999,
+        patience: int = CONTINUITY_PATIENCE,
+    ) -> None:
+        for name, value in (("probability", probability), ("others", others)):
+            if value is not None and not 0.0 < value < 1.0:
+                raise ValueError(f"{name} must be a probability in (0, 1); got {value}")
+        self.gate = float(chdtri(dimension, 1.0 - probability))
+        self.others_gate = float(chdtri(dimension, 1.0 - others)) if others is not None else None
+        self.patience = patience
+        self._global: dict[tuple[str, int], int] = {}
+        self._run: dict[tuple[str, int], int] = {}  # widened reports in a row
+        self.widened = 0
+        """Reports widened so far."""
+
+    def ingest(
+        self,
+        model: WorldModel,
+        robot: str,
+        detections: Sequence[Detection],
+        local_ids: Sequence[int],
+    ) -> IngestResult:
+        """The global ``model`` takes one report of ``robot`` (``detections``, one scan,
+        with their ``local_ids``): widened (:meth:`widen`) against the model at the
+        report's time, then noted (:meth:`note`). Raises what
+        :meth:`WorldModel.ingest` raises (nothing is noted then)."""
+        if len(local_ids) != len(detections):
+            raise ValueError(
+                f"need one local id per detection; got {len(local_ids)} for {len(detections)}"
+            )
+        if not detections:
+            return model.ingest([])
+        at = detections[0].time
+        before = WorldState(time=at, objects=())
+        if model.latest_time is not None:
+            # older than the history: the ingest refuses it
+            with contextlib.suppress(BeforeHistoryError):
+                before = model.world(time=at)
+        scan = self.widen(robot, detections, local_ids, before)
+        result = model.ingest(scan)
+        self.note(robot, scan, local_ids, before, model.world(time=at))
+        return result
+
+    def widen(
+        self,
+        robot: str,
+        detections: Sequence[Detection],
+        local_ids: Sequence[int],
+        world: WorldState,
+    ) -> list[Detection]:
+        """``detections`` (one report of ``robot``), each one whose local object went to a
+        global object of ``world`` (the global model at the report's time, before it
+        takes the report) that it lies outside the gate of, and that no other object of
+        ``world`` could take (``others`` gate), widened towards it."""
+        objects = {o.id: o for o in world.objects}
+        result = []
+        for det, local_id in zip(detections, local_ids, strict=True):
+            known = self._global.get((robot, local_id))
+            obj = objects.get(known) if known is not None else None
+            if obj is None or det.covariance is None:
+                result.append(det)
+                continue
+            z = np.asarray(det.position)
+            R = np.asarray(det.covariance, dtype=float)
+            delta = z - np.asarray(obj.position)
+            q = float(delta @ np.linalg.solve(np.asarray(obj.covariance) + R, delta))
+            key = (robot, local_id)
+            if q <= self.gate:
+                self._run.pop(key, None)
+                result.append(det)
+                continue
+            if self._run.get(key, 0) >= self.patience or (
+                self.others_gate is not None
+                and any(
+                    _distance2(z, R, other) <= self.others_gate
+                    for other in world.objects
+                    if other.id != obj.id
+                )
+            ):
+                result.append(det)
+                continue
+            R = R + (1.0 / self.gate - 1.0 / q) * np.outer(delta, delta)
+            covariance = tuple(tuple(float(v) for v in row) for row in (R + R.T) / 2.0)
+            result.append(det.model_copy(update={"covariance": covariance}))
+            self._run[key] = self._run.get(key, 0) + 1
+            self.widened += 1
+        return result
+
+    def note(
+        self,
+        robot: str,
+        detections: Sequence[Detection],
+        local_ids: Sequence[int],
+        before: WorldState,
+        after: WorldState,
+    ) -> None:
+        """Remember which global object each of ``detections`` (one report of ``robot``,
+        as the global model took it) updated. ``before`` and ``after``: the global model
+        at the report's time before and after it took the report. An object last seen at
+        the report's time took the detection whose Kalman update of its ``before``
+        version comes nearest its ``after`` version (a new object: nearest the
+        detection), Mahalanobis distance with its ``after`` covariance, within the gate;
+        nearest pairs first, each object and detection once. A detection that updated
+        none (a tentative new object, clutter) keeps what was remembered."""
+        prior = {o.id: o for o in before.objects}
+        pairs: list[tuple[float, int, int]] = []
+        for obj in after.objects:
+            if not detections or obj.last_seen != detections[0].time:
+                continue
+            x, P = np.asarray(obj.position), np.asarray(obj.covariance)
+            old = prior.get(obj.id)
+            for k, det in enumerate(detections):
+                z = np.asarray(det.position)
+                if old is None:
+                    expected = z
+                else:
+                    x_b, P_b = np.asarray(old.position), np.asarray(old.covariance)
+                    R = np.asarray(det.covariance, dtype=float) if det.covariance else 0.0
+                    # x+ = x + P (P + R)^-1 (z - x): the Kalman update of a position
+                    expected = x_b + P_b @ np.linalg.solve(P_b + R, z - x_b)
+                delta = x - expected
+                d2 = float(delta @ np.linalg.solve(P, delta))
+                if d2 <= self.gate:
+                    pairs.append((d2, k, obj.id))
+        pairs.sort()
+        used: set[int] = set()
+        done: set[int] = set()
+        for _, k, object_id in pairs:
+            if k in done or object_id in used:
+                continue
+            done.add(k)
+            used.add(object_id)
+            self._global[(robot, local_ids[k])] = object_id
+
+
 class TeamModel:
     """Local models per robot and the global team model (paper 000).
 
@@ -464,20 +669,30 @@ class TeamModel:
     knowledge
         Knowledge of the local models; the global one gets :func:`global_knowledge`.
     strategy
-        What local reports carry.
+        What local reports carry (default ``detections``).
+    continuity
+        A probability: the global model keeps a robot's report on the global object
+        its local object went to before (:class:`Continuity`; default
+        :data:`CONTINUITY_PROBABILITY`); ``None``: every report is associated afresh.
     """
 
     def __init__(
         self,
         knowledge: Knowledge,
-        strategy: Strategy | str = Strategy.UPDATED,
+        strategy: Strategy | str = Strategy.DETECTIONS,
         *,
         reorder_window: float = 0.0,
+        continuity: float | None = CONTINUITY_PROBABILITY,
     ) -> None:
         self.knowledge = knowledge
         self.strategy = Strategy(strategy)
         self.locals: dict[str, LocalModel] = {}
         self.global_model = WorldModel(global_knowledge(knowledge), reorder_window=reorder_window)
+        self.continuity = (
+            Continuity(knowledge.world.dimension, continuity, knowledge.world.gate_probability)
+            if continuity is not None
+            else None
+        )
         self.messages = 0
         self.bytes = 0
 
@@ -504,7 +719,13 @@ class TeamModel:
         reports.sort(key=lambda r: (r.time, r.robot))
         sent = 0
         for report in reports:
-            self.global_model.ingest(list(report.detections))
+            if self.continuity is not None:
+                detections = [Detection.model_validate(d) for d in report.detections]
+                self.continuity.ingest(
+                    self.global_model, report.robot, detections, report.local_ids
+                )
+            else:
+                self.global_model.ingest(list(report.detections))
             self.messages += 1
             self.bytes += report.size
             sent += len(report.detections)

@@ -64,9 +64,18 @@ def add_team_options(parser: argparse.ArgumentParser) -> None:
     )
     team.add_argument(
         "--strategy",
-        default="updated",
+        default="detections",
         choices=("all", "updated", "detections", "ci", "information"),
         help="what local models send (with --levels 2)",
+    )
+    team.add_argument(
+        "--continuity",
+        type=float,
+        default=0.99,  # semwm.team.CONTINUITY_PROBABILITY (not imported: start-up time)
+        metavar="P",
+        help="with --levels 2: the global model keeps a robot's report on the global "
+        "object its local object went to, widening a report outside that object's P "
+        "gate (semwm.team.Continuity); 0: every report associated afresh",
     )
     team.add_argument(
         "--drift-gate",
@@ -103,6 +112,7 @@ def simulate_team(
         strategy=args.strategy,
         drift_gate=args.drift_gate if args.drift_gate > 0 else None,
         seed=args.seed,
+        continuity=args.continuity if args.continuity > 0 else None,
     )
     write_run(team.result, out, ablations=ablations)
     metrics_file = out / "metrics.json"

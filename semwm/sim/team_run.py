@@ -57,7 +57,13 @@ from semwm.sim.metrics import compute_metrics
 from semwm.sim.runner import RunResult, scans, taxonomy_of, truth_points, world_points
 from semwm.sim.scenarios import Scenario, TruthFrame
 from semwm.sources import SourceRegistry, TimeGuard
-from semwm.team import LocalModel, Strategy, global_knowledge
+from semwm.team import (
+    CONTINUITY_PROBABILITY,
+    Continuity,
+    LocalModel,
+    Strategy,
+    global_knowledge,
+)
 from semwm.world import WorldModel
 from semwm.world_types import WorldState
 
@@ -144,6 +150,7 @@ class _Message:
     seq: int
     source: str = field(compare=False)
     detections: list[Detection] = field(compare=False)
+    local_ids: tuple[int, ...] | None = field(compare=False, default=None)
 
 
 def run_team(
@@ -152,12 +159,13 @@ def run_team(
     *,
     levels: int = 1,
     network: Network | None = None,
-    strategy: Strategy | str = Strategy.UPDATED,
+    strategy: Strategy | str = Strategy.DETECTIONS,
     report_period: float = 0.1,
     drift_gate: float | None = 0.95,
     seed: int = 0,
     gospa_c: float | None = None,
     horizon: float | None = None,
+    continuity: float | None = CONTINUITY_PROBABILITY,
 ) -> TeamRun:
     """Play ``scenario`` through a flat (``levels=1``) or two-level team.
 
@@ -166,7 +174,12 @@ def run_team(
     the local estimate (:meth:`semwm.team.LocalModel.due`); ``None``: only when it
     has a new object. ``horizon`` (s): how far ahead the gate compares the global
     view with the local estimate (:meth:`~semwm.team.LocalModel.due`); by default the
-    report period."""
+    report period. ``continuity`` (two levels, a probability): the receiver keeps a
+    robot's report on the global object its local object went to before
+    (:class:`semwm.team.Continuity` with this probability; by default
+    :data:`~semwm.team.CONTINUITY_PROBABILITY`); ``None``: every report is associated
+    afresh. The defaults, ``detections`` with continuity, are the two-level
+    configuration closest to flat (docs/team.md)."""
     if levels not in (1, 2):
         raise ValueError(f"levels must be 1 or 2; got {levels}")
     net = network or Network()
@@ -188,6 +201,11 @@ def run_team(
         hold=net.model_hold if reorder else 0.0,
     )
     locals_ = {s: LocalModel(s, knowledge, strategy) for s in sources} if levels == 2 else {}
+    keep = (
+        Continuity(knowledge.world.dimension, continuity, knowledge.world.gate_probability)
+        if levels == 2 and continuity is not None
+        else None
+    )
     phase_rng = np.random.default_rng(20_000 + seed)
     phase = {s: float(phase_rng.uniform(0.0, report_period)) for s in sources}
     next_report: dict[str, float] = {}
@@ -221,7 +239,7 @@ def run_team(
             sent_bytes += report.size
             sent_detections += len(report.detections)
             detections = [Detection.model_validate(d) for d in report.detections]
-            messages.append(_Message(t + latency(), seq, source, detections))
+            messages.append(_Message(t + latency(), seq, source, detections, report.local_ids))
             seq += 1
     if levels == 1:
         n_messages = len(messages)
@@ -251,7 +269,7 @@ def run_team(
     #    arrival (reorder) or once held (hold); evaluate at truth times
     registry = SourceRegistry(TimeGuard(max_ahead=None, max_jump=None))
     messages.sort()
-    buffer: list[tuple[float, str, int, list[Detection]]] = []
+    buffer: list[tuple[float, str, int, list[Detection], tuple[int, ...] | None]] = []
     worlds: list[WorldState] = []
     cpu_global = 0.0
     late = 0
@@ -259,16 +277,25 @@ def run_team(
     m_i = s_i = 0
     hold = net.hold_time
 
-    def process(scan: list[Detection]) -> int:
-        """Ingest ``scan``; the detections dropped as late."""
+    def process(scan: list[Detection], local_ids: tuple[int, ...] | None = None) -> int:
+        """Ingest ``scan`` (a report with its ``local_ids``: kept on the global objects
+        they went to before, :class:`~semwm.team.Continuity`); the detections dropped as
+        late."""
         nonlocal last_processed
-        if not reorder and scan[0].time < last_processed - 1e-9:
+        at = scan[0].time
+        if not reorder and at < last_processed - 1e-9:
             return len(scan)
+        source = scan[0].source or ""
+        if local_ids is not None and len(local_ids) != len(scan):
+            local_ids = None  # placement left some out: which is which is not known
         try:
-            receiver.ingest(scan)
+            if keep is not None and local_ids is not None:
+                keep.ingest(receiver, source, scan, local_ids)
+            else:
+                receiver.ingest(scan)
         except OutOfOrderError:
             return len(scan)
-        last_processed = max(last_processed, scan[0].time)
+        last_processed = max(last_processed, at)
         return 0
 
     for frame in scenario.truth:
@@ -288,11 +315,12 @@ def run_team(
             placement = registry.place(m.detections)
             placed = [d for d in placement.detections if isinstance(d, Detection)]
             if reorder:
-                late += process(placed)
+                late += process(placed, m.local_ids)
             else:
-                heapq.heappush(buffer, (placed[0].time, m.source, m.seq, placed))
+                heapq.heappush(buffer, (placed[0].time, m.source, m.seq, placed, m.local_ids))
         while buffer and buffer[0][0] <= now - hold + 1e-9:
-            late += process(heapq.heappop(buffer)[3])
+            _, _, _, held, ids = heapq.heappop(buffer)
+            late += process(held, ids)
         worlds.append(_world_at(receiver, now))
         cpu_global += clock.process_time() - start
 
@@ -332,7 +360,10 @@ def run_team(
         offset_errors=errors,
         peer_label_rate=peer_label_rate(scenario.truth, worlds),
         nees=mean_nees(scenario.truth, worlds),
-        extra={"replayed_scans": receiver.replayed_scans},
+        extra={
+            "replayed_scans": receiver.replayed_scans,
+            "continuity_widened": keep.widened if keep is not None else None,
+        },
     )
 
 
