@@ -472,6 +472,12 @@ CONTINUITY_PROBABILITY = 0.99
 brought within, against the global object it went to before (:class:`Continuity`)."""
 
 
+CONTINUITY_MEMORY = 10.0
+"""s: :class:`Continuity` forgets a local object not reported for this long (local ids
+are not reused: the local model dropped it, or it will be noted again when it comes
+back), so its memory holds what robots report now, not every object ever reported."""
+
+
 CONTINUITY_PATIENCE = 1
 """How many reports in a row of one local object :class:`Continuity` widens: one that
 stays off the global object longer is another object."""
@@ -519,8 +525,12 @@ class Continuity:
     patience
         Widened reports in a row per local object.
 
-    The memory holds one entry per local object ever reported (local ids are not
-    reused); it is not pruned.
+    memory
+        s after its last report that a local object is forgotten
+        (:data:`CONTINUITY_MEMORY`).
+
+    The memory holds one entry per local object reported within ``memory`` s of the
+    newest report (local ids are not reused); older ones are dropped as reports come.
     """
 
     def __init__(
@@ -529,6 +539,7 @@ class Continuity:
         probability: float = CONTINUITY_PROBABILITY,
         others: float | None = 0.9999,
         patience: int = CONTINUITY_PATIENCE,
+        memory: float = CONTINUITY_MEMORY,
     ) -> None:
         for name, value in (("probability", probability), ("others", others)):
             if value is not None and not 0.0 < value < 1.0:
@@ -536,7 +547,9 @@ class Continuity:
         self.gate = float(chdtri(dimension, 1.0 - probability))
         self.others_gate = float(chdtri(dimension, 1.0 - others)) if others is not None else None
         self.patience = patience
+        self.memory = memory
         self._global: dict[tuple[str, int], int] = {}
+        self._reported: dict[tuple[str, int], float] = {}  # time of its last report
         self._run: dict[tuple[str, int], int] = {}  # widened reports in a row
         self.widened = 0
         """Reports widened so far."""
@@ -567,7 +580,27 @@ class Continuity:
         scan = self.widen(robot, detections, local_ids, before)
         result = model.ingest(scan)
         self.note(robot, scan, local_ids, before, model.world(time=at))
+        self._forget(robot, local_ids, at)
         return result
+
+    def __len__(self) -> int:
+        """Local objects remembered."""
+        return len(self._global)
+
+    def _forget(self, robot: str, local_ids: Sequence[int], at: float) -> None:
+        """Note that ``robot`` reported ``local_ids`` at ``at``, and drop the local objects
+        not reported for :attr:`memory` s (about once per ``memory`` of reports)."""
+        for local_id in local_ids:
+            self._reported[(robot, local_id)] = at
+        newest = max(self._reported.values(), default=at)
+        oldest = min(self._reported.values(), default=at)
+        if newest - oldest <= 2.0 * self.memory:  # amortised: at most every memory s
+            return
+        for key, last in list(self._reported.items()):
+            if newest - last > self.memory:
+                del self._reported[key]
+                self._global.pop(key, None)
+                self._run.pop(key, None)
 
     def widen(
         self,

@@ -125,3 +125,16 @@ def test_widen_brings_the_report_to_the_gate_edge_along_the_offset_only(robocup)
     S = np.asarray(obj.covariance) + np.asarray(far.covariance)
     assert float(delta @ np.linalg.solve(S, delta)) == pytest.approx(keep.gate)
     assert far.covariance[1][1] == pytest.approx(0.01)  # across the offset: unchanged
+
+
+def test_the_memory_forgets_local_objects_no_longer_reported(robocup) -> None:  # type: ignore[no-untyped-def]
+    """A long-running team reports new local objects all the time (ids are not reused):
+    the memory keeps only those reported within ``memory`` s, not every one ever."""
+    keep = Continuity(robocup.world.dimension, memory=1.0)
+    model = WorldModel(global_knowledge(robocup))
+    for step in range(60):  # a new local object every 0.1 s for 6 s
+        t = 0.1 * step
+        model.ingest(own_pose(t))
+        keep.ingest(model, "peer2", seen(t + 0.01, 0.05, 0.01), [step])
+    assert 1 <= len(keep) <= 30  # about 2 x memory of 0.1 s reports at most, not 60
+    assert len(keep._reported) <= 30
