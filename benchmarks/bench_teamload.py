@@ -117,6 +117,25 @@ def reader(url: str, until: threading.Event, out: dict[str, Any]) -> None:
     out["reader"] = latencies
 
 
+def drive(
+    process: Any, url: str, robots: list[threading.Thread], results: dict[str, Any], start: float
+) -> tuple[float, float]:
+    """Run ``robots`` (threads posting to ``url``) with a :func:`reader` beside them until
+    every robot is done: the wall time from ``start`` (s) and the server's CPU (s)."""
+    done = threading.Event()
+    watcher = threading.Thread(target=reader, args=(url, done, results))
+    cpu_before = cpu_seconds(process.pid)
+    watcher.start()
+    for thread in robots:
+        thread.start()
+    for thread in robots:
+        thread.join()
+    wall = time.monotonic() - start
+    done.set()
+    watcher.join()
+    return wall, cpu_seconds(process.pid) - cpu_before
+
+
 def _metric(text: str, name: str) -> float | None:
     """A metric's value in Prometheus text (``None`` if absent)."""
     for line in text.splitlines():
@@ -144,23 +163,12 @@ def run(seconds: float, hold: float = 0.0, order_tolerance: float | None = None)
         process, url = launch(options, Path(tmp) / "server.log")
         try:
             results: dict[str, Any] = {}
-            done = threading.Event()
             start = time.monotonic() + 0.5
             robots = [
                 threading.Thread(target=robot, args=(i, url, seconds, results, start))
                 for i in range(ROBOTS)
             ]
-            watcher = threading.Thread(target=reader, args=(url, done, results))
-            cpu_before = cpu_seconds(process.pid)
-            watcher.start()
-            for thread in robots:
-                thread.start()
-            for thread in robots:
-                thread.join()
-            done.set()
-            watcher.join()
-            wall = time.monotonic() - start
-            server_cpu = cpu_seconds(process.pid) - cpu_before
+            wall, server_cpu = drive(process, url, robots, results, start)
             world = httpx.get(f"{url}/world", timeout=30).json()
             metrics = httpx.get(f"{url}/metrics", timeout=30).text
         finally:
@@ -326,7 +334,6 @@ def overload_run(seconds: float, late: str, busy: bool = True) -> dict[str, Any]
         try:
             with busy_core() if busy else contextlib.nullcontext(0):
                 results: dict[str, Any] = {}
-                done = threading.Event()
                 start = time.monotonic() + 0.5
                 clock = (start, time.time() + 0.5)
                 until = start + 2.0 * seconds  # a run that falls behind: at most twice as long
@@ -336,17 +343,7 @@ def overload_run(seconds: float, late: str, busy: bool = True) -> dict[str, Any]
                     )
                     for i in range(ROBOTS)
                 ]
-                watcher = threading.Thread(target=reader, args=(url, done, results))
-                cpu_before = cpu_seconds(process.pid)
-                watcher.start()
-                for thread in robots:
-                    thread.start()
-                for thread in robots:
-                    thread.join()
-                wall = time.monotonic() - start
-                done.set()
-                watcher.join()
-                server_cpu = cpu_seconds(process.pid) - cpu_before
+                wall, server_cpu = drive(process, url, robots, results, start)
             world = httpx.get(f"{url}/world", timeout=30).json()
             metrics = httpx.get(f"{url}/metrics", timeout=30).text
         finally:
