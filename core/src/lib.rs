@@ -7,7 +7,8 @@
 //! (the small matrices: inverse, log determinant, the Mahalanobis gate) and
 //! `filters::factory` (one class's filter); `existence` and `coverage` (the
 //! missed-detection model); `hypotheses` (merging and pruning, eq. 3) and `expansion`
-//! (the hypothesis algebra of one scan, eqs. 1 and 4-8). The Python engine is the specification;
+//! (the hypothesis algebra of one scan, eqs. 1 and 4-8); `rates` (the detection rates
+//! observed on the sources' streams, the state kept between scans). The Python engine is the specification;
 //! the parity tests (tests/engines/) hold these kernels to it.
 
 pub mod coverage;
@@ -17,3 +18,5 @@ pub mod expansion;
 pub mod filters;
 pub mod hypotheses;
 mod python;
+mod python_rates;
+pub mod rates;

@@ -48,7 +48,7 @@ fn to_py_err(py: Python<'_>, error: KernelError) -> PyErr {
 }
 
 /// Runs `work` without the GIL, with panics caught: the one way kernels are called.
-fn run<T: Send>(
+pub(crate) fn run<T: Send>(
     py: Python<'_>,
     name: &str,
     work: impl FnOnce() -> KernelResult<T> + Send,
@@ -975,5 +975,6 @@ fn semwm_core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_function(wrap_pyfunction!(hull_distance, module)?)?;
     module.add_class::<PyScanExpansion>()?;
     module.add_function(wrap_pyfunction!(merge_prune, module)?)?;
+    module.add_class::<crate::python_rates::PyObservedRates>()?;
     Ok(())
 }
