@@ -426,7 +426,7 @@ class WorldModel:
         if gone:
             state = self._state
             clusters = self._mhf.without(state.clusters, gone, state.tracks)
-            referenced: set[int] = set().union(*(c.keys for c in clusters))
+            referenced = sorted(set().union(*(c.keys for c in clusters)))
             tracks = {k: state.tracks[k] for k in referenced}
             existence = {k: state.existence.get(k, 1.0) for k in referenced}
             self._state = replace(state, clusters=clusters, tracks=tracks, existence=existence)
@@ -1021,7 +1021,7 @@ class WorldModel:
             mass: dict[int, float] = {}
             for h in cluster.hypotheses:  # most probable first
                 p = math.exp(h.log_weight)
-                for key in h.tracks:
+                for key in sorted(h.tracks):  # key order: it orders the ids given
                     mass[key] = mass.get(key, 0.0) + p
             for key, p in mass.items():  # in order of first appearance
                 track = state.tracks[key]

@@ -126,7 +126,7 @@ def apply_kick(mhf: MultipleHypothesisFilter, state: MHFState, kick: Kick) -> MH
         children: list[tuple[frozenset[int], float, float]] = []
         for h in cluster.hypotheses:
             branches = [(h.tracks, h.log_weight)]
-            for old in h.tracks & kicked.keys():
+            for old in sorted(h.tracks & kicked.keys()):
                 p = mhf.knowledge.classes[tracks[old].cls].kick_probability
                 grown = []
                 for held, weight in branches:
@@ -138,7 +138,7 @@ def apply_kick(mhf: MultipleHypothesisFilter, state: MHFState, kick: Kick) -> MH
             children.extend((held, weight, h.rate) for held, weight in branches)
         hypotheses: tuple[Hypothesis, ...] = prune(merge(children), mhf.ratio, mhf.max_hypotheses)
         clusters.extend(mhf._split(hypotheses, tracks))
-    referenced: set[int] = set().union(*(c.keys for c in clusters))
+    referenced = sorted(set().union(*(c.keys for c in clusters)))
     return replace(
         state,
         clusters=tuple(clusters),

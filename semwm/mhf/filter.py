@@ -442,7 +442,9 @@ class MultipleHypothesisFilter:
         if self.merge_distance > 0.0:
             untouched = {id(c) for c in clusters}
             final = self._merge_similar(final, table, untouched)
-        referenced: set[int] = set().union(*(c.keys for c in final))
+        # in key order: the order of the next scan's predicted rows, which orders the
+        # keys its updates get (a set's order is CPython's hashing, no specification)
+        referenced = sorted(set().union(*(c.keys for c in final)))
         tracks = {k: table.tracks[k] for k in referenced}
         kept = {k: table.existence.get(k, 1.0) for k in referenced}
         observed = state.observed
@@ -1009,7 +1011,7 @@ def _without(
     for h in hypotheses:
         removed = h.tracks & gone
         if removed:
-            rate = h.rate - sum(tracks[k].rate for k in removed)
+            rate = h.rate - sum(tracks[k].rate for k in sorted(removed))
             children.append((h.tracks - removed, h.log_weight, rate))
         else:
             children.append((h.tracks, h.log_weight, h.rate))
