@@ -55,7 +55,7 @@ def in_view_probability(
 def gauss_hermite_rule() -> tuple[_F, _F]: ...
 def ndtr(values_: _F, /) -> _F: ...
 def range_coverage(positions: _F, sensor: _F, reach: float, spread: _F | None = None) -> _F: ...
-def hull_distance(points: _F, corners: _F, /) -> _F | None: ...
+def hull_distance(points: _F, corners: _F, /) -> _F: ...
 
 # the expansion of one scan (core/src/expansion.rs, core/src/hypotheses.rs)
 class ScanExpansion:
@@ -86,3 +86,74 @@ def merge_prune(
     ratio: float,
     max_hypotheses: int,
 ) -> tuple[list[int], list[int], list[float], list[float]]: ...
+
+# the observed rates (core/src/mhf/rates.rs)
+_ClockRow = tuple[str, float, float | None, list[float] | None, float]
+_CountRow = tuple[str, str, str, float, float, list[int]]
+_SeenRow = tuple[int, list[tuple[str, str, float]]]
+_AlarmRow = tuple[str, str, float, list[int], int]
+
+class ObservedRates:
+    def __init__(self) -> None: ...
+    @staticmethod
+    def of(
+        sources: list[_ClockRow],
+        streams: list[_CountRow],
+        seen: list[_SeenRow],
+        false_alarms: list[_AlarmRow],
+    ) -> ObservedRates: ...
+    def state(
+        self,
+    ) -> tuple[list[_ClockRow], list[_CountRow], list[_SeenRow], list[_AlarmRow]]: ...
+
+# the whole scan, the state kept in the core (core/src/mhf/filter.rs, state.rs)
+_VersionRow = tuple[
+    tuple[int, int, int, str | None],
+    tuple[int, int, list[float], list[float], list[float]],
+    tuple[float, float, float, float],
+    tuple[list[float], list[str], float],
+]
+_VersionOut = tuple[
+    tuple[int, int, int, str | None],
+    tuple[_F, _F, _F],
+    tuple[float, float, float, float],
+    tuple[_F, list[str], float],
+]
+_ClusterRow = list[tuple[float, list[int], float]]
+
+class State:
+    @staticmethod
+    def empty() -> State: ...
+    @staticmethod
+    def of(
+        clusters: list[_ClusterRow],
+        versions: list[_VersionRow],
+        time: float | None,
+        next_key: int,
+        observed: ObservedRates,
+    ) -> State: ...
+    @property
+    def time(self) -> float | None: ...
+    @property
+    def next_key(self) -> int: ...
+    @property
+    def hypothesis_count(self) -> int: ...
+    @property
+    def cluster_count(self) -> int: ...
+    @property
+    def track_count(self) -> int: ...
+    def cluster_ids(self) -> list[int]: ...
+    def clusters(self, indices: list[int] | None = None) -> list[_ClusterRow]: ...
+    def entries(self) -> tuple[list[int], list[int], list[float]]: ...
+    def versions(self, keys: list[int]) -> list[_VersionOut]: ...
+    def observed(self) -> ObservedRates: ...
+
+class Engine:
+    def __init__(self, tables: dict[str, object]) -> None: ...
+    def process_scan(
+        self,
+        state: State,
+        measurements: list[tuple[object, ...]],
+        view: tuple[object, ...] | None = None,
+    ) -> State: ...
+    def class_names(self) -> list[str]: ...

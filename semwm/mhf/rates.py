@@ -705,29 +705,38 @@ def _normal_pdf(x: float) -> float:
     return math.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi)
 
 
+FLAT = 1e-6
+"""Corners whose smallest singular value (centred) is at most this fraction of their
+largest lie on one line (or plane) for :func:`hull_distance`: it measures to the segment
+of their extremes. Stated here, not left to qhull's own tolerance, so that every engine
+draws the line in the same place."""
+
+
 def hull_distance(points: FloatArray, corners: FloatArray) -> FloatArray:
     """``(N,)`` (m): how far each point lies outside the convex hull of ``corners``
-    ``(M, d)`` (0 inside): the distance to the point for one corner, to the segment for
-    two or for corners on one line; otherwise the largest signed distance to the
-    hull's facets (exact inside and along the faces, at most the true distance
-    beyond a corner)."""
+    ``(M, d)`` (0 inside): the distance to the point for one corner, to the segment of
+    the extremes for fewer than ``d + 1`` corners or corners on one line or plane
+    (:data:`FLAT`); otherwise the largest signed distance to the hull's facets (exact
+    inside and along the faces, at most the true distance beyond a corner)."""
     if corners.shape[0] == 1:
         offset = points - corners[0]
         result: FloatArray = np.sqrt(np.einsum("nd,nd->n", offset, offset))
         return result
-    if corners.shape[0] >= points.shape[1] + 1:
+    centred = corners - corners.mean(axis=0)
+    _, singular, axes = np.linalg.svd(centred, full_matrices=False)
+    solid = corners.shape[0] >= points.shape[1] + 1 and singular[-1] > FLAT * singular[0]
+    if solid:
         from scipy.spatial import ConvexHull, QhullError  # only scans of several need it
 
         try:
             equations = ConvexHull(corners).equations  # (F, d + 1): unit normal, offset
-        except QhullError:  # on one line (or plane): the segment of its extremes
+        except QhullError:  # qhull's tolerance is tighter than FLAT: not expected
             pass
         else:
             signed = points @ equations[:, :-1].T + equations[:, -1]
             outside: FloatArray = np.maximum(signed.max(axis=1), 0.0)
             return outside
-    centred = corners - corners.mean(axis=0)
-    direction = np.linalg.svd(centred, full_matrices=False)[2][0]
+    direction = axes[0]
     along = centred @ direction
     a = corners.mean(axis=0) + along.min() * direction
     b = corners.mean(axis=0) + along.max() * direction

@@ -14,7 +14,6 @@ import numpy as np
 
 from semwm.filters.engine import EngineUnavailable
 from semwm.filters.motion import FloatArray
-from semwm.mhf import rates
 from semwm.mhf.existence import Region, _bounds
 from semwm.mhf.measurement import SensorView
 
@@ -105,11 +104,7 @@ def range_coverage(
 
 
 def hull_distance(points: FloatArray, corners: FloatArray) -> FloatArray:
-    """:func:`semwm.mhf.rates.hull_distance`: in Rust for one corner and for 2-D corners
-    whose hull is not flat; for 3-D hulls and corners on or near one line (where qhull's
-    own tolerance chooses between a thin hull and the segment) the specification runs."""
+    """:func:`semwm.mhf.rates.hull_distance`."""
     _require()
-    result: FloatArray | None = _core.hull_distance(_f64(points), _f64(corners))
-    if result is None:
-        return rates.hull_distance(points, corners)
+    result: FloatArray = _core.hull_distance(_f64(points), _f64(corners))
     return result

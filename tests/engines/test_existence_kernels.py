@@ -188,15 +188,15 @@ def test_hull_distance(seed: int, n: int, m: int, d: int, layout: str) -> None:
     _close(rust.hull_distance(points, corners), expected)
 
 
-def test_hull_distance_in_rust_for_plane_hulls_only() -> None:
+def test_hull_distance_of_squares_lines_and_cubes() -> None:
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
     points = np.array([[0.5, 0.5], [3.0, 0.5], [0.5, -0.25]])
-    got = _core.hull_distance(points, square)
-    assert got is not None
-    _close(got, np.array([0.0, 2.0, 0.25]))
-    line = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]])
-    assert _core.hull_distance(points, line) is None  # left to the specification
-    assert _core.hull_distance(np.zeros((1, 3)), np.ones((4, 3))) is None
+    _close(_core.hull_distance(points, square), np.array([0.0, 2.0, 0.25]))
+    line = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]])  # flat: the segment
+    _close(_core.hull_distance(points, line), rates.hull_distance(points, line))
+    cube = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=float)
+    inner = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 3.0], [-2.0, 0.5, 0.5]])
+    _close(_core.hull_distance(inner, cube), np.array([0.0, 2.0, 2.0]))
 
 
 def test_engines_choose_their_kernels() -> None:

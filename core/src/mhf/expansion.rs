@@ -17,7 +17,7 @@
 //!   rules of paper 000 III-B: the object that takes a labelled detection holds the
 //!   label, any other holder gives it up (a copy of its version without label);
 //! - identical children merge and the tree is pruned (eq. 3, n_hyp,max,
-//!   `crate::hypotheses`), and objects every hypothesis holds split off (`split`).
+//!   `crate::mhf::hypotheses`), and objects every hypothesis holds split off (`split`).
 //!
 //! The scan's track table is kept here as far as the algebra reads it (each version's
 //! rate and label; which versions took a detection, derive from a version that existed
@@ -27,9 +27,10 @@
 //! iterates in ascending key order, as the specification does (`sorted`).
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
 
 use crate::error::{KernelError, KernelResult};
-use crate::hypotheses::{
+use crate::mhf::hypotheses::{
     checked_ln, holds, log_add, prune, replaced, with_key, Cluster, Hypothesis, KeyMap, KeySet,
     Merged,
 };
@@ -138,7 +139,7 @@ pub struct Scan {
     pub first_new: u64,
     /// The next key to give (the table's, after the options took theirs).
     pub next_key: u64,
-    pub clusters: Vec<(usize, Cluster)>,
+    pub clusters: Vec<(usize, Arc<Cluster>)>,
     pub cluster_count: usize,
     pub options: Vec<ScanOption>,
 }
@@ -149,7 +150,9 @@ pub struct Scan {
 #[derive(Debug, Clone)]
 pub struct Expanded {
     pub untouched: Vec<usize>,
-    pub clusters: Vec<Cluster>,
+    /// The given clusters no detection touched, in their order.
+    pub untouched_clusters: Vec<Arc<Cluster>>,
+    pub clusters: Vec<Arc<Cluster>>,
     pub ops: Vec<Op>,
     pub next_key: u64,
 }
@@ -277,13 +280,13 @@ impl Table {
 
 /// The scan's working set of clusters (`_ClusterBook`), in the order of their ids.
 struct Book {
-    clusters: BTreeMap<usize, Cluster>,
+    clusters: BTreeMap<usize, Arc<Cluster>>,
     owner: KeyMap<u64, usize>,
     next: usize,
 }
 
 impl Book {
-    fn new(clusters: Vec<(usize, Cluster)>, next: usize) -> Book {
+    fn new(clusters: Vec<(usize, Arc<Cluster>)>, next: usize) -> Book {
         let mut owner = KeyMap::default();
         for (id, cluster) in &clusters {
             for &key in &cluster.keys {
@@ -314,7 +317,7 @@ impl Book {
                 for key in &cluster.keys {
                     self.owner.remove(key);
                 }
-                taken.push(cluster.hypotheses);
+                taken.push(Arc::unwrap_or_clone(cluster).hypotheses);
             }
         }
         taken
@@ -325,7 +328,7 @@ impl Book {
             for &key in &cluster.keys {
                 self.owner.insert(key, self.next);
             }
-            self.clusters.insert(self.next, cluster);
+            self.clusters.insert(self.next, Arc::new(cluster));
             self.next += 1;
         }
     }
@@ -361,7 +364,7 @@ pub fn product(
                 let log_weight = a.log_weight + b.log_weight;
                 if log_weight >= floor {
                     merged.add(
-                        crate::hypotheses::union(&a.keys, &b.keys),
+                        crate::mhf::hypotheses::union(&a.keys, &b.keys),
                         log_weight,
                         a.rate + b.rate,
                     );
@@ -388,6 +391,15 @@ fn max_weight(hypotheses: &[Hypothesis]) -> f64 {
 /// own (ascending key); a cluster whose only hypothesis is empty is dropped. Under
 /// `paper` one global cluster stays.
 fn split(hypotheses: Vec<Hypothesis>, table: &Table, mht: bool) -> KernelResult<Vec<Cluster>> {
+    split_with(hypotheses, |key| table.rate(key), mht)
+}
+
+/// `_split` with each version's rate from `rate`.
+pub fn split_with(
+    hypotheses: Vec<Hypothesis>,
+    rate: impl Fn(u64) -> KernelResult<f64>,
+    mht: bool,
+) -> KernelResult<Vec<Cluster>> {
     if !mht {
         if hypotheses.len() == 1 && hypotheses[0].keys.is_empty() {
             return Ok(Vec::new());
@@ -403,7 +415,7 @@ fn split(hypotheses: Vec<Hypothesis>, table: &Table, mht: bool) -> KernelResult<
     }
     let mut result = Vec::with_capacity(common.len() + 1);
     for &key in &common {
-        result.push(Cluster::certain(key, table.rate(key)?));
+        result.push(Cluster::certain(key, rate(key)?));
     }
     let count = hypotheses.len();
     if count > 1 && common.is_empty() {
@@ -411,7 +423,7 @@ fn split(hypotheses: Vec<Hypothesis>, table: &Table, mht: bool) -> KernelResult<
     } else if count > 1 {
         let mut common_rate = 0.0;
         for &key in &common {
-            common_rate += table.rate(key)?;
+            common_rate += rate(key)?;
         }
         let mut merged = Merged::new();
         for h in hypotheses {
@@ -739,14 +751,17 @@ pub fn expand_scan(scan: Scan) -> KernelResult<Expanded> {
         .into_iter()
         .filter(|id| book.clusters.contains_key(id))
         .collect();
-    let clusters = book
-        .clusters
-        .into_iter()
-        .filter(|(id, _)| *id >= scan.cluster_count)
-        .map(|(_, cluster)| cluster)
-        .collect();
+    let (mut untouched_clusters, mut clusters) = (Vec::new(), Vec::new());
+    for (id, cluster) in book.clusters {
+        if id < scan.cluster_count {
+            untouched_clusters.push(cluster);
+        } else {
+            clusters.push(cluster);
+        }
+    }
     Ok(Expanded {
         untouched,
+        untouched_clusters,
         clusters,
         ops: table.ops,
         next_key: table.next_key,
@@ -912,7 +927,10 @@ impl ScanArrays {
             .ids
             .iter()
             .zip(&given.sizes)
-            .map(|(&id, &size)| (id, Cluster::of(hypotheses.by_ref().take(size).collect())))
+            .map(|(&id, &size)| {
+                let cluster = Cluster::of(hypotheses.by_ref().take(size).collect());
+                (id, Arc::new(cluster))
+            })
             .collect();
         let n_options = given_options.kinds.len();
         length("option_labels", given_options.labels.len(), n_options)?;
@@ -1022,7 +1040,7 @@ impl From<Expanded> for ExpandedArrays {
             out.cluster_sizes.push(cluster.hypotheses.len());
             out.cluster_key_sizes.push(cluster.keys.len());
             out.cluster_keys.extend_from_slice(&cluster.keys);
-            for h in cluster.hypotheses {
+            for h in &cluster.hypotheses {
                 out.hypothesis_sizes.push(h.keys.len());
                 out.hypothesis_keys.extend_from_slice(&h.keys);
                 out.log_weights.push(h.log_weight);
@@ -1107,7 +1125,7 @@ mod tests {
             tracks: KeyMap::from_iter([(1, info(1.0)), (5, info(1.5)), (6, info(2.0))]),
             first_new: 5,
             next_key: 7,
-            clusters: vec![(0, Cluster::certain(1, 1.0))],
+            clusters: vec![(0, Cluster::certain(1, 1.0).into())],
             cluster_count: 1,
             options,
         }
@@ -1132,7 +1150,7 @@ mod tests {
         };
         let expanded = expand_scan(one_object(true, vec![ScanOption::Detection(option)])).unwrap();
         assert!(expanded.untouched.is_empty() && expanded.ops.is_empty());
-        assert_eq!(expanded.clusters, vec![Cluster::certain(5, 1.5)]);
+        assert_eq!(expanded.clusters, vec![Arc::new(Cluster::certain(5, 1.5))]);
         assert_eq!(expanded.next_key, 7);
     }
 
@@ -1185,7 +1203,7 @@ mod tests {
             tracks,
             first_new: 5,
             next_key: 7,
-            clusters: vec![(0, Cluster::of(both))],
+            clusters: vec![(0, Cluster::of(both).into())],
             cluster_count: 1,
             options: vec![ScanOption::Detection(option)],
         };

@@ -25,7 +25,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
-use crate::hypotheses::{KeyMap, KeySet};
+use crate::mhf::hypotheses::{KeyMap, KeySet};
 
 /// Strength (pseudo-counts) of the prior of a stream's per-scan detection probability.
 pub const PRIOR_COUNTS: f64 = 10.0;
@@ -464,6 +464,94 @@ impl ObservedRates {
             false_alarms: alarms,
         }
     }
+}
+
+/// What one scan without a sensor view tells about where its source looked
+/// (`ScanCoverage`): its source, its detections' positions (`M x d`), where its sensor
+/// was (the detections' `sensor_position`, or a static detector's position), the
+/// largest range of its detectors when every one has one, and whether every detector of
+/// it is static.
+#[derive(Debug, Clone)]
+pub struct ScanCoverage {
+    pub source: Name,
+    pub positions: Vec<Vec<f64>>,
+    pub sensor: Option<Vec<f64>>,
+    pub reach: Option<f64>,
+    pub fixed: bool,
+}
+
+/// One object as `watched` reads it: the sources whose detections it took, its
+/// estimate's position, its widest region margin, whether it is unconfirmed, and its
+/// spread (m).
+pub struct WatchedObject<'a> {
+    pub sources: &'a [Name],
+    pub position: &'a [f64],
+    pub radius: f64,
+    pub unconfirmed: bool,
+    pub spread: f64,
+}
+
+/// The probability that the scan could have seen each object (`ObservedRates.watched`,
+/// whose docstring states the three cases: the sensor's range, a static detector's
+/// fixed coverage, and coverage learnt from what the source reports, within the convex
+/// hull of its detections widened by the object's margin, or an unconfirmed object the
+/// source started).
+pub fn watched(scan: &ScanCoverage, objects: &[WatchedObject<'_>]) -> Vec<f64> {
+    let count = objects.len();
+    if count == 0 {
+        return Vec::new();
+    }
+    if let (Some(sensor), Some(reach)) = (&scan.sensor, scan.reach) {
+        let margins = objects.iter().any(|o| o.radius != 0.0);
+        return objects
+            .iter()
+            .map(|o| {
+                let reach = if margins {
+                    (reach - o.radius).max(0.0)
+                } else {
+                    reach
+                };
+                crate::mhf::coverage::range_coverage(o.position, sensor, reach, Some(o.spread))
+            })
+            .collect();
+    }
+    if scan.fixed {
+        return vec![1.0; count];
+    }
+    let by_source: Vec<bool> = objects
+        .iter()
+        .map(|o| o.sources.contains(&scan.source))
+        .collect();
+    if !by_source.iter().any(|&b| b) {
+        return vec![0.0; count];
+    }
+    let mut near = vec![false; count];
+    if let Some(first) = scan.positions.first() {
+        let rows: Vec<usize> = (0..count).filter(|&i| by_source[i]).collect();
+        let d = objects[0].position.len().min(first.len());
+        let points: Vec<f64> = rows
+            .iter()
+            .flat_map(|&i| objects[i].position[..d].iter().copied())
+            .collect();
+        let corners: Vec<f64> = scan
+            .positions
+            .iter()
+            .flat_map(|p| p[..d].iter().copied())
+            .collect();
+        let distances = crate::mhf::coverage::hull_distance(&points, &corners, d);
+        for (&i, distance) in rows.iter().zip(distances) {
+            near[i] = distance <= objects[i].radius;
+        }
+    }
+    (0..count)
+        .map(|i| {
+            if by_source[i] && (near[i] || objects[i].unconfirmed) {
+                1.0
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -8,6 +8,10 @@
 //! the shape checks are there to rule out, is caught and raised as `RuntimeError`,
 //! never unwound into Python. No `unsafe` here.
 
+mod engine;
+mod rates;
+mod similar;
+
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use numpy::ndarray::{Array, ArrayView, Dimension, IntoDimension};
@@ -19,16 +23,16 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyType;
 
-use crate::coverage;
 use crate::error::{expect_shape, KernelError, KernelResult};
-use crate::existence;
-use crate::expansion::{
-    self, ClusterArrays, EntryArrays, ExpandedArrays, OptionArrays, ScanArrays, TrackArrays,
-};
 use crate::filters::batched;
 use crate::filters::factory::{ClassTables, TransitionPeriod};
 use crate::filters::small;
-use crate::hypotheses;
+use crate::mhf::coverage;
+use crate::mhf::existence;
+use crate::mhf::expansion::{
+    self, ClusterArrays, EntryArrays, ExpandedArrays, OptionArrays, ScanArrays, TrackArrays,
+};
+use crate::mhf::hypotheses;
 
 /// A kernel error as the Python exception the Python engine would raise.
 fn to_py_err(py: Python<'_>, error: KernelError) -> PyErr {
@@ -169,8 +173,8 @@ type PeriodArgs<'py> = (
 /// One class's filter: the numeric tables of `semwm.filters.factory.ClassFilter`, handed
 /// over once per class, and its batched prediction.
 #[pyclass(frozen, name = "ClassFilter", module = "semwm._core")]
-struct PyClassFilter {
-    tables: ClassTables,
+pub(crate) struct PyClassFilter {
+    pub(crate) tables: ClassTables,
 }
 
 #[pymethods]
@@ -734,39 +738,26 @@ fn range_coverage<'py>(
 }
 
 /// How far each point `(N, d)` lies outside the convex hull of `corners` `(M, d)`
-/// (`semwm.mhf.rates.hull_distance`): for one corner, or for 2-D corners whose hull is
-/// not flat; `None` otherwise (3-D hulls and corners on or near one line, where the
-/// specification's qhull decides), for the caller to ask the specification.
+/// (`semwm.mhf.rates.hull_distance`).
 #[pyfunction]
 fn hull_distance<'py>(
     py: Python<'py>,
     points: &Bound<'py, PyArray2<f64>>,
     corners: &Bound<'py, PyArray2<f64>>,
-) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let (x, shape) = values(points)?;
     let (c, c_shape) = values(corners)?;
     let (count, d) = (shape[0], shape[1]);
     expect_shape("corners", &c_shape, &[c_shape[0], d]).map_err(shape_error)?;
-    let m = c_shape[0];
+    if c_shape[0] == 0 {
+        return Err(shape_error(KernelError::Shape(
+            "corners: expected at least one corner".to_string(),
+        )));
+    }
     let result = run(py, "hull_distance", || {
-        if m == 1 {
-            return Ok(Some(
-                (0..count)
-                    .map(|i| coverage::distance(&x[i * d..(i + 1) * d], &c))
-                    .collect::<Vec<f64>>(),
-            ));
-        }
-        if d != 2 || m < 3 {
-            return Ok(None);
-        }
-        let hull: Vec<[f64; 2]> = (0..m).map(|j| [c[2 * j], c[2 * j + 1]]).collect();
-        Ok(coverage::hull_facets(&hull).map(|facets| {
-            (0..count)
-                .map(|i| coverage::outside([x[2 * i], x[2 * i + 1]], &facets))
-                .collect::<Vec<f64>>()
-        }))
+        Ok(coverage::hull_distance(&x, &c, d))
     })?;
-    result.map(|r| to_numpy(py, count, r)).transpose()
+    to_numpy(py, count, result)
 }
 
 // ---------------------------------------------------------------- the expansion of a scan
@@ -975,6 +966,9 @@ fn semwm_core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_function(wrap_pyfunction!(hull_distance, module)?)?;
     module.add_class::<PyScanExpansion>()?;
     module.add_function(wrap_pyfunction!(merge_prune, module)?)?;
-    module.add_class::<crate::python_rates::PyObservedRates>()?;
+    module.add_function(wrap_pyfunction!(similar::merge_similar, module)?)?;
+    module.add_class::<crate::python::rates::PyObservedRates>()?;
+    module.add_class::<engine::PyEngine>()?;
+    module.add_class::<engine::PyState>()?;
     Ok(())
 }

@@ -1,4 +1,4 @@
-//! `semwm._core.ObservedRates`: the observed rates (`crate::rates`) kept in the core
+//! `semwm._core.ObservedRates`: the observed rates (`crate::mhf::rates`) kept in the core
 //! between scans, with the methods of the specification's `ObservedRates`
 //! (`semwm/mhf/rates.py`) that the scan calls; `semwm/mhf/rust_rates.py` wraps it.
 //!
@@ -14,9 +14,9 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::error::{KernelError, KernelResult};
-use crate::hypotheses::{KeyMap, KeySet};
+use crate::mhf::hypotheses::{KeyMap, KeySet};
+use crate::mhf::rates::{FalseAlarms, Name, ObservedRates, ScanReport, SourceClock, StreamCounts};
 use crate::python::run;
-use crate::rates::{FalseAlarms, Name, ObservedRates, ScanReport, SourceClock, StreamCounts};
 
 /// A source's clock: name, last scan time, mean interval, sensor position, speed.
 type ClockRow = (String, f64, Option<f64>, Option<Vec<f64>>, f64);
@@ -49,7 +49,7 @@ fn expect_rows(name: &str, got: usize, count: usize) -> KernelResult<()> {
 /// The observed rates of one state (`semwm.mhf.rates.ObservedRates` in the core).
 #[pyclass(name = "ObservedRates", module = "semwm._core", frozen)]
 pub struct PyObservedRates {
-    rates: Arc<ObservedRates>,
+    pub(crate) rates: Arc<ObservedRates>,
 }
 
 #[pymethods]

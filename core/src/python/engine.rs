@@ -1,0 +1,486 @@
+//! `semwm._core.Engine` and `semwm._core.State`: the whole scan in the core, the state
+//! kept in the core between scans (`crate::mhf::filter`). `semwm/mhf/core_engine.py`
+//! builds the knowledge's tables with the Python engine's own code and wraps both.
+//!
+//! A scan's detections cross as one list of plain tuples, a state stays in the core;
+//! Python reads a state's clusters and versions (to publish them, for the tests and the
+//! hypotheses view) through `State`'s methods, which copy only what is asked for.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use numpy::{IntoPyArray, PyArray1, PyArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use crate::error::KernelError;
+use crate::mhf::existence::View;
+use crate::mhf::filter::Filter;
+use crate::mhf::hypotheses::{Cluster, Hypothesis};
+use crate::mhf::measurement::{Measurement, SensorView};
+use crate::mhf::rates::Name;
+use crate::mhf::state::{Entry, FilterState, State, Version};
+use crate::mhf::tables::{Appearance, ClassSpec, DetectorSpec, LeaveRelation, Tables};
+use crate::python::rates::PyObservedRates;
+use crate::python::{run, PyClassFilter};
+
+fn item<'py, T: FromPyObjectOwned<'py>>(dict: &Bound<'py, PyDict>, key: &str) -> PyResult<T> {
+    let value = dict
+        .get_item(key)?
+        .ok_or_else(|| PyValueError::new_err(format!("tables: missing {key:?}")))?;
+    value.extract::<T>().map_err(|error| {
+        let error: PyErr = error.into();
+        PyValueError::new_err(format!("tables: {key:?} has the wrong type: {error}"))
+    })
+}
+
+fn items<'py>(dict: &Bound<'py, PyDict>, key: &str) -> PyResult<Vec<Bound<'py, PyDict>>> {
+    let list: Bound<'py, PyList> = item(dict, key)?;
+    list.iter()
+        .map(|entry| {
+            entry.cast_into::<PyDict>().map_err(|_| {
+                PyValueError::new_err(format!("tables: every entry of {key:?} must be a dict"))
+            })
+        })
+        .collect()
+}
+
+fn class_spec(class: &Bound<'_, PyDict>) -> PyResult<ClassSpec> {
+    let filter: PyRef<'_, PyClassFilter> = item(class, "filter")?;
+    let leave_relations = items(class, "leave_relations")?
+        .iter()
+        .map(|r| {
+            Ok(LeaveRelation {
+                target: item(r, "target")?,
+                max_distance: item(r, "max_distance")?,
+                frequency: item(r, "frequency")?,
+            })
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    let appearance = items(class, "appearance")?
+        .iter()
+        .map(|r| {
+            Ok(Appearance {
+                covered: item(r, "covered")?,
+                frequency: item(r, "frequency")?,
+                max_distance: item(r, "max_distance")?,
+                log_num: item(r, "log_num")?,
+                known: item(r, "known")?,
+            })
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok(ClassSpec {
+        name: item(class, "name")?,
+        filter: filter.tables.clone(),
+        initial_covariance: item(class, "initial_covariance")?,
+        initial_mode_probabilities: item(class, "initial_mode_probabilities")?,
+        detection_frequency: item(class, "detection_frequency")?,
+        detection_probability: item(class, "detection_probability")?,
+        leave_frequency: item(class, "leave_frequency")?,
+        new_frequency: item(class, "new_frequency")?,
+        max_position_variance: item(class, "max_position_variance")?,
+        max_time_without_update: item(class, "max_time_without_update")?,
+        region_margin: item(class, "region_margin")?,
+        region_cap: item(class, "region_cap")?,
+        leave_relations,
+        appearance,
+        can_appear: item(class, "can_appear")?,
+        kick_probability: item(class, "kick_probability")?,
+    })
+}
+
+fn detector_spec(detector: &Bound<'_, PyDict>) -> PyResult<DetectorSpec> {
+    Ok(DetectorSpec {
+        name: item(detector, "name")?,
+        clutter_log_density: item(detector, "clutter_log_density")?,
+        likelihood: item(detector, "likelihood")?,
+        range: item(detector, "range")?,
+        fixed: item(detector, "fixed")?,
+        position: item(detector, "position")?,
+    })
+}
+
+fn tables_from(tables: &Bound<'_, PyDict>) -> PyResult<Tables> {
+    let classes = items(tables, "classes")?
+        .iter()
+        .map(class_spec)
+        .collect::<PyResult<Vec<_>>>()?;
+    let detectors = items(tables, "detectors")?
+        .iter()
+        .map(detector_spec)
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok(Tables {
+        dim: item(tables, "dim")?,
+        classes,
+        detectors,
+        default_detector: item(tables, "default_detector")?,
+        mht: item(tables, "mht")?,
+        missed_detections: item(tables, "missed_detections")?,
+        observed_rates: item(tables, "observed_rates")?,
+        ratio: item(tables, "ratio")?,
+        max_hypotheses: item(tables, "max_hypotheses")?,
+        merge_distance: item(tables, "merge_distance")?,
+        removal_existence: item(tables, "removal_existence")?,
+        region: item(tables, "region")?,
+        gate: item(tables, "gate")?,
+        gate_quantile: item(tables, "gate_quantile")?,
+        label_gate: item(tables, "label_gate")?,
+        log_label_error: item(tables, "log_label_error")?,
+        log_volume: item(tables, "log_volume")?,
+        subtree: item(tables, "subtree")?,
+        depth: item(tables, "depth")?,
+        appear_mask: item(tables, "appear_mask")?,
+        compatible: item(tables, "compatible")?,
+        class_likelihood: item(tables, "class_likelihood")?,
+        most_specific: item(tables, "most_specific")?,
+        min_existence: item(tables, "min_existence")?,
+    })
+}
+
+fn to_py_err(error: KernelError) -> PyErr {
+    PyValueError::new_err(error.to_string())
+}
+
+/// One detection as it crosses: seq, time, class index, z, R (flat `d x d`), detector
+/// index, source (`""` for none), label, clutter rate, sensor position, time std.
+type MeasurementRow = (
+    u64,
+    f64,
+    usize,
+    Vec<f64>,
+    Vec<f64>,
+    usize,
+    String,
+    Option<String>,
+    f64,
+    Option<Vec<f64>>,
+    f64,
+);
+
+/// A sensor view: time, source (`""`), position (x, y), heading, range, half opening,
+/// lineages looked at, detector index.
+type ViewRow = (
+    f64,
+    String,
+    (f64, f64),
+    f64,
+    Option<f64>,
+    Option<f64>,
+    Vec<u64>,
+    Option<usize>,
+);
+
+/// A version as it crosses: (key, lineage, class index, label), (modes, state size, x
+/// flat, P flat, mu), (time, last seen, created, rate), (class probabilities, sources,
+/// existence).
+type VersionRow = (
+    (u64, u64, usize, Option<String>),
+    (usize, usize, Vec<f64>, Vec<f64>, Vec<f64>),
+    (f64, f64, f64, f64),
+    (Vec<f64>, Vec<String>, f64),
+);
+
+/// A cluster as it crosses: its hypotheses (log weight, keys, rate).
+type ClusterRow = Vec<(f64, Vec<u64>, f64)>;
+
+/// The filter of one knowledge base, its whole scan in the core.
+#[pyclass(frozen, name = "Engine", module = "semwm._core")]
+pub struct PyEngine {
+    filter: Arc<Filter>,
+}
+
+#[pymethods]
+impl PyEngine {
+    /// The engine of `tables` (a dict: `semwm/mhf/core_engine.py: tables`).
+    #[new]
+    fn new(tables: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let tables = tables_from(tables)?;
+        let filter = Filter::new(tables).map_err(to_py_err)?;
+        Ok(PyEngine {
+            filter: Arc::new(filter),
+        })
+    }
+
+    /// The state after one scan (`MultipleHypothesisFilter.process_scan`): detections
+    /// sharing a source and a time, and where the sensor looked (or `None`).
+    #[pyo3(signature = (state, measurements, view=None))]
+    fn process_scan(
+        &self,
+        py: Python<'_>,
+        state: &PyState,
+        measurements: Vec<MeasurementRow>,
+        view: Option<ViewRow>,
+    ) -> PyResult<PyState> {
+        let tables = &self.filter.tables;
+        let (d, k) = (tables.dim, tables.class_count());
+        let mut scan = Vec::with_capacity(measurements.len());
+        for (j, row) in measurements.into_iter().enumerate() {
+            let (seq, time, cls, z, r, detector, source, label, clutter_rate, sensor, time_std) =
+                row;
+            if cls >= k || detector >= tables.detectors.len() || z.len() != d || r.len() != d * d {
+                return Err(PyValueError::new_err(format!(
+                    "measurements[{j}]: expected a class below {k}, a detector below {}, \
+                     z of {d} and R of {} values",
+                    tables.detectors.len(),
+                    d * d
+                )));
+            }
+            scan.push(Measurement {
+                seq,
+                time,
+                cls,
+                z,
+                r,
+                detector,
+                source: Name::from(source),
+                label: label.map(Name::from),
+                clutter_rate,
+                sensor,
+                time_std,
+            });
+        }
+        let view = view.map(
+            |(time, source, (x, y), heading, range, half_angle, looking_at, detector)| SensorView {
+                time,
+                source: Name::from(source),
+                view: View {
+                    position: [x, y],
+                    heading,
+                    range,
+                    half_angle,
+                },
+                looking_at,
+                detector,
+            },
+        );
+        let filter = self.filter.clone();
+        let before = state.state.clone();
+        let after = run(py, "Engine.process_scan", move || {
+            filter.process_scan(&before, &scan, view.as_ref())
+        })?;
+        Ok(PyState {
+            state: Arc::new(after),
+        })
+    }
+
+    /// The class names, in the order of their indices.
+    fn class_names(&self) -> Vec<String> {
+        self.filter
+            .tables
+            .classes
+            .iter()
+            .map(|c| c.name.clone())
+            .collect()
+    }
+}
+
+/// A state of the filter, kept in the core (`MHFState`).
+#[pyclass(frozen, name = "State", module = "semwm._core")]
+pub struct PyState {
+    pub(crate) state: Arc<State>,
+}
+
+fn version_row<'py>(py: Python<'py>, entry: &Entry) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+    let v = &entry.version;
+    let s = &v.state;
+    let x = PyArray1::from_slice(py, &s.x).reshape([s.modes, s.size])?;
+    let p = PyArray1::from_slice(py, &s.p).reshape([s.modes, s.size, s.size])?;
+    let mu = s.mu.clone().into_pyarray(py);
+    let probs = v.class_probs.to_vec().into_pyarray(py);
+    let sources: Vec<String> = v.sources.iter().map(|n| n.to_string()).collect();
+    (
+        (
+            v.key,
+            v.lineage,
+            v.cls,
+            v.label.as_ref().map(|l| l.to_string()),
+        ),
+        (x, p, mu),
+        (v.time, v.last_seen, v.created, v.rate),
+        (probs, sources, entry.existence),
+    )
+        .into_pyobject(py)
+}
+
+#[pymethods]
+impl PyState {
+    /// The state before the first scan.
+    #[staticmethod]
+    fn empty() -> Self {
+        PyState {
+            state: Arc::new(State::empty()),
+        }
+    }
+
+    /// A state from a Python `MHFState`'s parts (its clusters, versions, time, next key
+    /// and observed rates); versions in any order, held once each.
+    #[staticmethod]
+    fn of(
+        clusters: Vec<ClusterRow>,
+        versions: Vec<VersionRow>,
+        time: Option<f64>,
+        next_key: u64,
+        observed: &PyObservedRates,
+    ) -> PyResult<Self> {
+        let mut tracks = BTreeMap::new();
+        for row in versions {
+            let ((key, lineage, cls, label), (modes, size, x, p, mu), times, rest) = row;
+            let (time, last_seen, created, rate) = times;
+            let (class_probs, sources, existence) = rest;
+            if x.len() != modes * size || p.len() != modes * size * size || mu.len() != modes {
+                return Err(PyValueError::new_err(format!(
+                    "version {key}: x, P and mu do not fit {modes} modes of size {size}"
+                )));
+            }
+            let mut sources: Vec<Name> = sources.into_iter().map(Name::from).collect();
+            sources.sort();
+            let version = Version {
+                key,
+                lineage,
+                cls,
+                label: label.map(Name::from),
+                state: Arc::new(FilterState {
+                    modes,
+                    size,
+                    x,
+                    p,
+                    mu,
+                }),
+                time,
+                last_seen,
+                created,
+                rate,
+                class_probs: class_probs.into(),
+                sources: sources.into(),
+            };
+            tracks.insert(
+                key,
+                Entry {
+                    version: Arc::new(version),
+                    existence,
+                },
+            );
+        }
+        let clusters = clusters
+            .into_iter()
+            .map(|hypotheses| {
+                let hypotheses = hypotheses
+                    .into_iter()
+                    .map(|(log_weight, mut keys, rate)| {
+                        keys.sort_unstable();
+                        Hypothesis {
+                            log_weight,
+                            keys,
+                            rate,
+                        }
+                    })
+                    .collect();
+                Arc::new(Cluster::of(hypotheses))
+            })
+            .collect();
+        Ok(PyState {
+            state: Arc::new(State {
+                clusters,
+                tracks,
+                time,
+                next_key,
+                observed: observed.rates.clone(),
+            }),
+        })
+    }
+
+    #[getter]
+    fn time(&self) -> Option<f64> {
+        self.state.time
+    }
+
+    #[getter]
+    fn next_key(&self) -> u64 {
+        self.state.next_key
+    }
+
+    #[getter]
+    fn hypothesis_count(&self) -> usize {
+        self.state.hypothesis_count()
+    }
+
+    #[getter]
+    fn cluster_count(&self) -> usize {
+        self.state.clusters.len()
+    }
+
+    #[getter]
+    fn track_count(&self) -> usize {
+        self.state.tracks.len()
+    }
+
+    /// Each cluster's identity (the address of its shared value: equal between two
+    /// states while both are alive exactly when the cluster is the same one).
+    fn cluster_ids(&self) -> Vec<usize> {
+        self.state
+            .clusters
+            .iter()
+            .map(|c| Arc::as_ptr(c) as usize)
+            .collect()
+    }
+
+    /// The clusters at `indices` (all without): their hypotheses as (log weight, keys,
+    /// rate).
+    #[pyo3(signature = (indices=None))]
+    fn clusters(&self, indices: Option<Vec<usize>>) -> PyResult<Vec<ClusterRow>> {
+        let clusters = &self.state.clusters;
+        let indices = indices.unwrap_or_else(|| (0..clusters.len()).collect());
+        indices
+            .into_iter()
+            .map(|i| {
+                let cluster = clusters.get(i).ok_or_else(|| {
+                    PyValueError::new_err(format!("cluster {i}: only {} clusters", clusters.len()))
+                })?;
+                Ok(cluster
+                    .hypotheses
+                    .iter()
+                    .map(|h| (h.log_weight, h.keys.clone(), h.rate))
+                    .collect())
+            })
+            .collect()
+    }
+
+    /// Every version's key, identity (as `cluster_ids`) and existence, in key order.
+    fn entries(&self) -> (Vec<u64>, Vec<usize>, Vec<f64>) {
+        let tracks = &self.state.tracks;
+        (
+            tracks.keys().copied().collect(),
+            tracks
+                .values()
+                .map(|e| Arc::as_ptr(&e.version) as usize)
+                .collect(),
+            tracks.values().map(|e| e.existence).collect(),
+        )
+    }
+
+    /// The versions of `keys` as rows: (key, lineage, class index, label), (x `(M, n)`,
+    /// P `(M, n, n)`, mu), (time, last seen, created, rate), (class probabilities,
+    /// sources, existence).
+    fn versions<'py>(
+        &self,
+        py: Python<'py>,
+        keys: Vec<u64>,
+    ) -> PyResult<Vec<Bound<'py, pyo3::types::PyTuple>>> {
+        keys.iter()
+            .map(|key| {
+                let entry = self.state.tracks.get(key).ok_or_else(|| {
+                    PyValueError::new_err(format!("no version {key} in this state"))
+                })?;
+                version_row(py, entry)
+            })
+            .collect()
+    }
+
+    /// The observed rates.
+    fn observed(&self) -> PyObservedRates {
+        PyObservedRates {
+            rates: self.state.observed.clone(),
+        }
+    }
+}

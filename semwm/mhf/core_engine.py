@@ -1,0 +1,403 @@
+"""The Rust engine's whole scan: the knowledge's tables handed to the core once, and the
+filter's state kept in the core between scans (``core/src/mhf/filter.rs``).
+
+:func:`tables` computes every number the core reads with the Python engine's own code
+(the same :class:`~semwm.mhf.filter.MultipleHypothesisFilter`, its ``Associator`` and
+``ClassModel``), so the two engines start from the same numbers. :class:`CoreEngine`
+runs a scan in one call; the state it returns, :class:`CoreState`, stays in the core
+and offers :class:`~semwm.mhf.state.MHFState`'s interface: its clusters and versions
+become Python values only when read (for publishing, queries and tests), and those
+already made for an earlier state are reused (a version and a cluster are immutable).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from semwm.filters import rust
+from semwm.mhf.measurement import Measurement, SensorView
+from semwm.mhf.rates import FalseAlarms, ObservedRates, SourceClock, StreamCounts
+from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
+
+if TYPE_CHECKING:
+    from semwm import _core
+    from semwm.mhf.filter import MultipleHypothesisFilter
+
+
+def tables(mhf: MultipleHypothesisFilter) -> dict[str, Any]:
+    """The knowledge's numeric tables as the core reads them
+    (``core/src/mhf/tables.rs``), from ``mhf``'s own computations."""
+    knowledge = mhf.knowledge
+    associator = mhf.associator
+    model = associator.class_model
+    taxonomy = mhf.taxonomy
+    names = model.names
+    classes = []
+    for name in names:
+        spec = knowledge.classes[name]
+        flt = mhf.factory.filter_for(name)
+        margin, cap = mhf._class_region_terms(name)
+        limits = mhf._limits[name]
+        appearance = []
+        for relation in spec.appearance:
+            covered = taxonomy.covers(relation.target)
+            log_frequency = math.log(relation.frequency) if relation.frequency > 0 else -math.inf
+            appearance.append(
+                {
+                    "covered": [other in covered for other in names],
+                    "frequency": float(relation.frequency),
+                    "max_distance": float(relation.max_distance),
+                    "log_num": log_frequency + associator._spread(relation.max_distance),
+                    "known": [
+                        [float(v) for v in known.position]
+                        for known in knowledge.known_objects
+                        if known.cls in covered
+                    ],
+                }
+            )
+        classes.append(
+            {
+                "name": name,
+                "filter": rust.class_filter(flt),
+                "initial_covariance": flt.initial_covariance.ravel().tolist(),
+                "initial_mode_probabilities": flt.initial_mode_probabilities.tolist(),
+                "detection_frequency": float(spec.detection_frequency),
+                "detection_probability": float(spec.detection_probability),
+                "leave_frequency": float(spec.leave_frequency),
+                "new_frequency": float(spec.new_frequency),
+                "max_position_variance": float(limits[0]),
+                "max_time_without_update": float(limits[1]),
+                "region_margin": np.asarray(margin, dtype=float).tolist(),
+                "region_cap": np.asarray(cap, dtype=float).tolist(),
+                "leave_relations": [
+                    {
+                        "target": np.asarray(target, dtype=float).tolist(),
+                        "max_distance": float(reach),
+                        "frequency": float(rate),
+                    }
+                    for target, reach, rate in mhf._leave_relations[name]
+                ],
+                "appearance": appearance,
+                "can_appear": bool(spec.new_frequency > 0.0 or spec.appearance),
+                "kick_probability": float(spec.kick_probability),
+            }
+        )
+    detectors = []
+    for name, detector in knowledge.detectors.items():
+        detectors.append(
+            {
+                "name": name,
+                "clutter_log_density": float(associator.clutter_log_density[name]),
+                "likelihood": model._likelihood[name].ravel().tolist(),
+                "range": None if detector.range is None else float(detector.range),
+                "fixed": bool(detector.static),
+                "position": None
+                if detector.position is None
+                else [float(v) for v in detector.position],
+            }
+        )
+    world = knowledge.world
+    detector_names = list(knowledge.detectors)
+
+    def specific(first: str, second: str) -> int | None:
+        if not taxonomy.compatible(first, second):
+            return None
+        return model.index[taxonomy.most_specific(first, second)]
+
+    return {
+        "dim": world.dimension,
+        "classes": classes,
+        "detectors": detectors,
+        "default_detector": detector_names.index(knowledge.default_detector),
+        "mht": associator.model == "mht",
+        "missed_detections": bool(mhf.missed_detections),
+        "observed_rates": bool(mhf.observed_rates),
+        "ratio": float(mhf.ratio),
+        "max_hypotheses": int(mhf.max_hypotheses),
+        "merge_distance": float(mhf.merge_distance),
+        "removal_existence": float(mhf.removal_existence),
+        "region": None if world.region is None else [(float(a), float(b)) for a, b in world.region],
+        "gate": float(associator.gate),
+        "gate_quantile": float(mhf._gate_quantile),
+        "label_gate": float(associator.label_gate),
+        "log_label_error": float(associator.log_label_error),
+        "log_volume": float(associator.log_volume),
+        "subtree": model.subtree.ravel().tolist(),
+        "depth": [float(v) for v in model.depth.tolist()],
+        "appear_mask": model.appear_mask.tolist(),
+        "compatible": [taxonomy.compatible(a, b) for a in names for b in names],
+        "class_likelihood": [taxonomy.class_likelihood(a, b) for a in names for b in names],
+        "most_specific": [specific(a, b) for a in names for b in names],
+        "min_existence": float(world.min_existence),
+    }
+
+
+def observed_from_core(rates: _core.ObservedRates) -> ObservedRates:
+    """The specification's :class:`ObservedRates` of the core's."""
+    sources, streams, seen, alarms = rates.state()
+    return ObservedRates(
+        {
+            name: SourceClock(last, interval, None if at is None else tuple(at), speed)
+            for name, last, interval, at, speed in sources
+        },
+        {
+            (s, d, c): StreamCounts(hits, expected, frozenset(detected))
+            for s, d, c, hits, expected, detected in streams
+        },
+        {lineage: {(s, d): at for s, d, at in rows} for lineage, rows in seen},
+        {
+            (s, d): FalseAlarms(since, frozenset(pending), count)
+            for s, d, since, pending, count in alarms
+        },
+    )
+
+
+def observed_to_core(rates: ObservedRates) -> _core.ObservedRates:
+    """The core's observed rates of the specification's."""
+    from semwm import _core
+
+    return _core.ObservedRates.of(
+        [
+            (name, c.last_time, c.interval, _listed(c.position), c.speed)
+            for name, c in rates.sources.items()
+        ],
+        [
+            (s, d, c, counts.hits, counts.expected, sorted(counts.detected))
+            for (s, d, c), counts in rates.streams.items()
+        ],
+        [
+            (lineage, [(s, d, at) for (s, d), at in streams.items()])
+            for lineage, streams in rates.seen.items()
+        ],
+        [
+            (s, d, alarms.since, sorted(alarms.pending), alarms.count)
+            for (s, d), alarms in rates.false_alarms.items()
+        ],
+    )
+
+
+def _listed(position: tuple[float, ...] | None) -> list[float] | None:
+    return None if position is None else list(position)
+
+
+class _Made:
+    """Python values made from one core state, reused for the next: a cluster or a
+    version made for a state is the same value in any state that shares it (the core
+    shares them by reference, and a shared one has the same address while both states
+    live; this keeps the state it was made for alive)."""
+
+    def __init__(self) -> None:
+        self.cluster_state: _core.State | None = None
+        self.clusters: dict[int, Cluster] = {}
+        self.track_state: _core.State | None = None
+        self.tracks: dict[int, Track] = {}
+
+
+class CoreState:
+    """A filter state kept in the core, with :class:`MHFState`'s interface (read-only)."""
+
+    __slots__ = ("_clusters", "_existence", "_observed", "_python", "_tracks", "core", "engine")
+
+    def __init__(self, core: _core.State, engine: CoreEngine) -> None:
+        self.core = core
+        self.engine = engine
+        self._tracks: dict[int, Track] | None = None
+        self._clusters: tuple[Cluster, ...] | None = None
+        self._existence: dict[int, float] | None = None
+        self._observed: ObservedRates | None = None
+        self._python: MHFState | None = None
+
+    @property
+    def time(self) -> float | None:
+        return self.core.time
+
+    @property
+    def next_key(self) -> int:
+        return self.core.next_key
+
+    @property
+    def hypothesis_count(self) -> int:
+        return self.core.hypothesis_count
+
+    @property
+    def clusters(self) -> tuple[Cluster, ...]:
+        if self._clusters is None:
+            self._clusters = self.engine._clusters_of(self.core)
+        return self._clusters
+
+    @property
+    def tracks(self) -> Mapping[int, Track]:
+        if self._tracks is None:
+            self._tracks, self._existence = self.engine._tracks_of(self.core)
+        return self._tracks
+
+    @property
+    def existence(self) -> Mapping[int, float]:
+        if self._existence is None:
+            self._tracks, self._existence = self.engine._tracks_of(self.core)
+        return self._existence
+
+    @property
+    def observed(self) -> ObservedRates:
+        if self._observed is None:
+            self._observed = observed_from_core(self.core.observed())
+        return self._observed
+
+    def python(self) -> MHFState:
+        """The same state as the specification's values."""
+        if self._python is None:
+            self._python = MHFState(
+                self.clusters, dict(self.tracks), self.time, self.next_key,
+                dict(self.existence), self.observed,
+            )  # fmt: skip
+        return self._python
+
+    @property
+    def best(self) -> Hypothesis:
+        return self.python().best
+
+    @property
+    def log10_joint_count(self) -> float:
+        return self.python().log10_joint_count
+
+    def top(self, k: int) -> list[Hypothesis]:
+        return self.python().top(k)
+
+    @property
+    def hypotheses(self) -> tuple[Hypothesis, ...]:
+        return self.python().hypotheses
+
+
+AnyState = MHFState | CoreState
+
+
+def as_python(state: AnyState) -> MHFState:
+    """``state`` as the specification's :class:`MHFState`."""
+    return state.python() if isinstance(state, CoreState) else state
+
+
+class CoreEngine:
+    """The whole scan in the core for one :class:`MultipleHypothesisFilter`."""
+
+    def __init__(self, mhf: MultipleHypothesisFilter) -> None:
+        from semwm import _core
+
+        self._core = _core
+        self.engine = _core.Engine(tables(mhf))
+        self.names: tuple[str, ...] = tuple(self.engine.class_names())
+        self.index = {name: i for i, name in enumerate(self.names)}
+        self.detectors = {name: i for i, name in enumerate(mhf.knowledge.detectors)}
+        self.dim = mhf.knowledge.world.dimension
+        self._made = _Made()
+
+    # ------------------------------------------------------------------ scans
+    def process_scan(
+        self, state: AnyState, measurements: Sequence[Measurement], view: SensorView | None
+    ) -> CoreState:
+        core = self.to_core(state)
+        rows = [self._row(m) for m in measurements]
+        after = self.engine.process_scan(core, rows, None if view is None else self._view(view))
+        return CoreState(after, self)
+
+    def _row(self, m: Measurement) -> tuple[Any, ...]:
+        return (
+            m.seq,
+            float(m.time),
+            self.index[m.cls],
+            m.z.tolist(),
+            m.R.ravel().tolist(),
+            self.detectors[m.detector],
+            m.source or "",
+            m.label,
+            float(m.clutter_rate),
+            None if m.sensor is None else m.sensor.tolist(),
+            float(m.time_std),
+        )
+
+    def _view(self, view: SensorView) -> tuple[Any, ...]:
+        return (
+            float(view.time),
+            view.source or "",
+            (float(view.position[0]), float(view.position[1])),
+            float(view.heading),
+            None if view.range is None else float(view.range),
+            None if view.half_angle is None else float(view.half_angle),
+            sorted(view.looking_at),
+            None if view.detector is None else self.detectors[view.detector],
+        )
+
+    def to_core(self, state: AnyState) -> _core.State:
+        """The core's state of ``state`` (made from the specification's values unless it
+        is this engine's)."""
+        if isinstance(state, CoreState) and state.engine is self:
+            return state.core
+        python = as_python(state)
+        existence = python.existence
+        versions = [
+            (
+                (t.key, t.lineage, self.index[t.cls], t.label),
+                (*t.x.shape, t.x.ravel().tolist(), t.P.ravel().tolist(), t.mu.tolist()),
+                (float(t.time), float(t.last_seen), float(t.created), float(t.rate)),
+                (t.class_probs.tolist(), sorted(t.sources), float(existence.get(t.key, 1.0))),
+            )
+            for t in python.tracks.values()
+        ]
+        clusters = [
+            [(h.log_weight, sorted(h.tracks), h.rate) for h in c.hypotheses]
+            for c in python.clusters
+        ]
+        return self._core.State.of(
+            clusters, versions, python.time, python.next_key, observed_to_core(python.observed)
+        )
+
+    # ------------------------------------------------------------------ reading a state
+    def _clusters_of(self, core: _core.State) -> tuple[Cluster, ...]:
+        made = self._made
+        ids = core.cluster_ids()
+        missing = [i for i, cid in enumerate(ids) if cid not in made.clusters]
+        rows = iter(core.clusters(missing)) if missing else iter(())
+        clusters: dict[int, Cluster] = {}
+        result = []
+        for cid in ids:
+            cluster = made.clusters.get(cid)
+            if cluster is None:
+                hypotheses = tuple(
+                    Hypothesis(lw, frozenset(keys), rate) for lw, keys, rate in next(rows)
+                )
+                cluster = Cluster.of(hypotheses)
+            clusters[cid] = cluster
+            result.append(cluster)
+        made.clusters = clusters
+        made.cluster_state = core
+        return tuple(result)
+
+    def _tracks_of(self, core: _core.State) -> tuple[dict[int, Track], dict[int, float]]:
+        made = self._made
+        keys, ids, existence = core.entries()
+        missing = [k for k, vid in zip(keys, ids, strict=True) if vid not in made.tracks]
+        made_now = iter(self._versions(core, missing)) if missing else iter(())
+        tracks: dict[int, Track] = {}
+        by_id: dict[int, Track] = {}
+        for key, vid in zip(keys, ids, strict=True):
+            track = made.tracks.get(vid)
+            if track is None:
+                track = next(made_now)
+            tracks[key] = track
+            by_id[vid] = track
+        made.tracks = by_id
+        made.track_state = core
+        return tracks, dict(zip(keys, existence, strict=True))
+
+    def _versions(self, core: _core.State, keys: list[int]) -> Iterator[Track]:
+        names = self.names
+        for head, (x, P, mu), times, (probs, sources, _) in core.versions(keys):
+            key, lineage, cls, label = head
+            time, last_seen, created, rate = times
+            yield Track(
+                key, lineage, names[cls], label, x, P, mu, time, last_seen, created, rate,
+                probs, frozenset(sources),
+            )  # fmt: skip
