@@ -87,6 +87,23 @@ def merge_prune(
     max_hypotheses: int,
 ) -> tuple[list[int], list[int], list[float], list[float]]: ...
 
+# twin merging (core/src/mhf/similar.rs), bound for its parity test
+def merge_similar(
+    hypothesis_keys: list[list[int]],
+    log_weights: list[float],
+    rates: list[float],
+    keys: list[int],
+    lineages: list[int],
+    classes: list[int],
+    labels: list[int | None],
+    x: list[_F],
+    p: list[_F],
+    mu: list[_F],
+    class_probs: list[_F],
+    existence: list[float],
+    max_distance: float,
+) -> tuple[list[list[int]], list[float], list[float]] | None: ...
+
 # the observed rates (core/src/mhf/rates.rs)
 _ClockRow = tuple[str, float, float | None, list[float] | None, float]
 _CountRow = tuple[str, str, str, float, float, list[int]]
@@ -145,8 +162,26 @@ class State:
     def cluster_ids(self) -> list[int]: ...
     def clusters(self, indices: list[int] | None = None) -> list[_ClusterRow]: ...
     def entries(self) -> tuple[list[int], list[int], list[float]]: ...
+    def serials(self, keys: list[int]) -> list[int]: ...
+    def lineages(self) -> list[int]: ...
+    def best_keys(self) -> list[int]: ...
     def versions(self, keys: list[int]) -> list[_VersionOut]: ...
     def observed(self) -> ObservedRates: ...
+
+class Book:
+    def __init__(self) -> None: ...
+    @staticmethod
+    def of(
+        values: list[tuple[int, float, float]],
+        poses: list[tuple[str, float, float]],
+        scans: list[tuple[str, float]],
+    ) -> Book: ...
+    def state(
+        self,
+    ) -> tuple[
+        list[tuple[int, float, float]], list[tuple[str, float, float]], list[tuple[str, float]]
+    ]: ...
+    def entry(self, lineage: int) -> tuple[float, float] | None: ...
 
 class Engine:
     def __init__(self, tables: dict[str, object]) -> None: ...
@@ -157,3 +192,14 @@ class Engine:
         view: tuple[object, ...] | None = None,
     ) -> State: ...
     def class_names(self) -> list[str]: ...
+    def advance(
+        self,
+        book: Book,
+        state: State,
+        detectors: list[int],
+        view: tuple[object, ...] | None = None,
+        source: str | None = None,
+    ) -> Book: ...
+    def current(
+        self, state: State, shown: list[int], ids: list[tuple[int, int]]
+    ) -> list[tuple[int, int]]: ...

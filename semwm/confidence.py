@@ -35,7 +35,7 @@ from semwm.knowledge.model import Knowledge, ResolvedClass
 from semwm.mhf.existence import in_view_probability
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import predict_tracks
-from semwm.mhf.state import MHFState, Track
+from semwm.mhf.state import StateView, Track
 
 ConfidenceState = Literal["valid", "suspicious", "invalid"]
 CONFIDENCE_STATES: tuple[ConfidenceState, ...] = ("valid", "suspicious", "invalid")
@@ -84,7 +84,7 @@ class ConfidenceBook:
         return value * math.exp(-spec.confidence_decay * max(0.0, time - since))
 
 
-def representatives(state: MHFState) -> dict[int, Track]:
+def representatives(state: StateView) -> dict[int, Track]:
     """Each lineage's version in the most probable hypothesis that holds it."""
     chosen: dict[int, Track] = {}
     tracks = state.tracks
@@ -110,7 +110,7 @@ def representatives(state: MHFState) -> dict[int, Track]:
 
 def advance(
     book: ConfidenceBook,
-    state: MHFState,
+    state: StateView,
     measurements: Sequence[Measurement],
     view: SensorView | None,
     knowledge: Knowledge,

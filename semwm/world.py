@@ -52,11 +52,12 @@ from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf import nearby
 from semwm.mhf.actions import Kick, apply_kick
+from semwm.mhf.core_engine import CoreState, as_python
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted
 from semwm.mhf.rates import StreamReport
-from semwm.mhf.state import Cluster, MHFState, Track
+from semwm.mhf.state import Cluster, MHFState, StateView, Track
 from semwm.validation import (
     ClassesHeld,
     DetectionInput,
@@ -127,7 +128,7 @@ class _Marginal(NamedTuple):
 class _LoggedScan:
     key: ScanKey
     measurements: tuple[Measurement, ...]
-    before: MHFState
+    before: StateView
     view: SensorView | None = None
     book: ConfidenceBook = field(default_factory=ConfidenceBook)
 
@@ -147,7 +148,7 @@ class _Held:
 
 _Tables = tuple[dict[int, int], int, dict[int, "_Published"], dict[int, "_Published"]]
 """The id tables: lineage -> id, the next id, the published and the lost objects."""
-_Link = tuple[_Held, MHFState, ConfidenceBook, _Tables]
+_Link = tuple[_Held, StateView, ConfidenceBook, _Tables]
 
 
 @dataclass(frozen=True)
@@ -157,7 +158,7 @@ class _Tentative:
     confidences and id tables after it. When a held scan is released, its link is
     committed as it is (no second run)."""
 
-    base: MHFState
+    base: StateView
     base_book: ConfidenceBook
     base_tables: _Tables
     chain: tuple[_Link, ...]
@@ -304,7 +305,7 @@ class WorldModel:
 
     def reset(self) -> None:
         """Forget every detection and object."""
-        self._state = MHFState.empty()
+        self._state: StateView = MHFState.empty()
         self._book = ConfidenceBook()
         self._summaries = {}
         self._log: list[_LoggedScan] = []
@@ -546,7 +547,7 @@ class WorldModel:
         return None
 
     def _commit(
-        self, state: MHFState, log: list[_LoggedScan], book: ConfidenceBook, floor: _Floor | None
+        self, state: StateView, log: list[_LoggedScan], book: ConfidenceBook, floor: _Floor | None
     ) -> None:
         self._state, self._log, self._book, self._replay_floor = state, log, book, floor
 
@@ -747,7 +748,7 @@ class WorldModel:
 
     def _process(
         self, measurements: Sequence[Measurement], view: SensorView | None = None
-    ) -> tuple[MHFState, list[_LoggedScan], ConfidenceBook, _Floor | None]:
+    ) -> tuple[StateView, list[_LoggedScan], ConfidenceBook, _Floor | None]:
         """Process new scans in time order, replaying logged scans they precede.
 
         Returns the new state, reorder log and confidences, and the log's replay floor
@@ -758,7 +759,7 @@ class WorldModel:
 
     def _process_scans(
         self, scans: dict[ScanKey, list[Measurement]], views: dict[ScanKey, SensorView]
-    ) -> tuple[MHFState, list[_LoggedScan], ConfidenceBook, _Floor | None]:
+    ) -> tuple[StateView, list[_LoggedScan], ConfidenceBook, _Floor | None]:
         """:meth:`_process` of scans grouped by key (``scans`` not empty; changed here)."""
         first = min(scans)
         # the first logged scan at or after ``first`` (the log is in key order; a new
@@ -874,11 +875,11 @@ class WorldModel:
 
     def _step(
         self,
-        state: MHFState,
+        state: StateView,
         book: ConfidenceBook,
         measurements: list[Measurement],
         view: SensorView | None,
-    ) -> tuple[MHFState, ConfidenceBook]:
+    ) -> tuple[StateView, ConfidenceBook]:
         """One scan processed: the MHF (paper 002) and the confidences (paper 004). The
         first scan of the query cache, from the same state, is taken from it: the same
         values, computed once."""
@@ -906,7 +907,7 @@ class WorldModel:
         state = self._state
         dim = self._knowledge.world.dimension
         current = self._current()
-        alive = {t.lineage for t in state.tracks.values()}
+        alive = self._lineages(state)
         now = state.time if state.time is not None else 0.0
         memory = self._knowledge.world.id_memory
         for object_id, pub in list(self._published.items()):
@@ -999,12 +1000,24 @@ class WorldModel:
                 del self._lost[object_id]
 
     # ------------------------------------------------------------------ queries
+    def _lineages(self, state: StateView) -> set[int]:
+        """Every lineage ``state`` holds."""
+        if isinstance(state, CoreState):
+            return set(state.core.lineages())
+        return {t.lineage for t in state.tracks.values()}
+
     def _current(self) -> dict[int, Track]:
         """The published world at the latest time: lineage -> version. ``mht``: objects
-        whose existence is at least ``min_existence``; ``paper``: the MAP hypothesis."""
+        whose existence is at least ``min_existence``; ``paper``: the MAP hypothesis.
+        The Rust engine computes it in the core (``core/src/world.rs``)."""
         state = self._state
+        core = self._mhf._core
+        if core is not None and isinstance(state, CoreState) and state.engine is core:
+            shown = [pub.lineage for pub in self._published.values()]
+            return core.current(state, shown, self._ids)
         if not self._mhf.mht:
-            return {state.tracks[k].lineage: state.tracks[k] for k in state.best.tracks}
+            tracks = state.tracks
+            return {tracks[k].lineage: tracks[k] for k in sorted(state.best.tracks)}
         if state.time is None:
             return {}
         # existence at the latest time (the scan updated it); inside the region judged
@@ -1172,7 +1185,7 @@ class WorldModel:
             result[best] = marginals[best]._replace(existence=total)
         return result
 
-    def _as_of(self, at: float) -> tuple[MHFState, ConfidenceBook]:
+    def _as_of(self, at: float) -> tuple[StateView, ConfidenceBook]:
         """The state and confidences as they were at ``at`` (s): the current ones from the
         newest scan on; before it, the ones after the last scan at or before ``at``, from
         the reorder history. Raises :class:`BeforeHistoryError` when the history does not
@@ -1192,7 +1205,7 @@ class WorldModel:
         return before, log[later].book
 
     def _marginals(
-        self, at: float, state: MHFState | None = None
+        self, at: float, state: StateView | None = None
     ) -> tuple[dict[int, _Marginal], Predicted]:
         """Every object's marginal existence at ``at`` and its most probable version, in
         ``state`` (default: the current one)."""
@@ -1450,10 +1463,10 @@ class HypothesesView:
     copy, so nothing the model does later changes the view.
     """
 
-    state: MHFState
+    state: StateView
     ids: Mapping[int, int]
     dimension: int
-    committed: MHFState
+    committed: StateView
 
     @property
     def hypothesis_count(self) -> int:
@@ -1552,9 +1565,10 @@ class HypothesesView:
         return summaries
 
 
-def _remap_classes(state: MHFState, old: tuple[str, ...], new: tuple[str, ...]) -> MHFState:
+def _remap_classes(state: StateView, old: tuple[str, ...], new: tuple[str, ...]) -> MHFState:
     """Carry every version's class distribution over to a changed class list: mass on a
     class that is gone is dropped, a new class starts at 0 (renormalised)."""
+    state = as_python(state)  # new Python values (either engine)
     if old == new:
         return state
     source = {name: i for i, name in enumerate(old)}

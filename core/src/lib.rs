@@ -9,7 +9,9 @@
 //! model's kernels, merging and pruning, the expansion of one scan, the observed rates). The Python engine is the specification;
 //! the parity tests (tests/engines/) hold these kernels to it.
 
+pub mod confidence;
 pub mod error;
 pub mod filters;
 pub mod mhf;
 mod python;
+pub mod world;

@@ -30,8 +30,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from semwm.filters.motion import FloatArray
+from semwm.mhf.core_engine import as_python
 from semwm.mhf.prune import merge, prune
-from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
+from semwm.mhf.state import Cluster, Hypothesis, MHFState, StateView, Track
 
 if TYPE_CHECKING:
     from semwm.mhf.filter import MultipleHypothesisFilter
@@ -48,7 +49,9 @@ class Kick:
     speed: float
 
 
-def kicked_version(mhf: MultipleHypothesisFilter, state: MHFState, key: int, kick: Kick) -> Track:
+def kicked_version(
+    mhf: MultipleHypothesisFilter, state: StateView, key: int, kick: Kick
+) -> Track:
     """The version of ``key`` that the kick moved: predicted to the kick time, velocity set."""
     track = state.tracks[key]
     flt = mhf.factory.filter_for(track.cls)
@@ -86,10 +89,11 @@ def kicked_version(mhf: MultipleHypothesisFilter, state: MHFState, key: int, kic
     )
 
 
-def apply_kick(mhf: MultipleHypothesisFilter, state: MHFState, kick: Kick) -> MHFState:
+def apply_kick(mhf: MultipleHypothesisFilter, state: StateView, kick: Kick) -> MHFState:
     """Split every hypothesis holding a kicked object into kicked / not kicked children
     (weights ``p`` and ``1 - p``, the class's ``kick_probability``), merged and pruned
     as the tree is (paper 002 eq. 3, n_hyp,max)."""
+    state = as_python(state)  # a kick makes new Python values (either engine)
     targets = [k for k, t in state.tracks.items() if t.lineage in kick.lineages]
     if not targets:
         return state

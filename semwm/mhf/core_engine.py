@@ -21,7 +21,7 @@ import numpy as np
 from semwm.filters import rust
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.rates import FalseAlarms, ObservedRates, SourceClock, StreamCounts
-from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
+from semwm.mhf.state import Cluster, Hypothesis, MHFState, StateView, Track
 
 if TYPE_CHECKING:
     from semwm import _core
@@ -84,6 +84,9 @@ def tables(mhf: MultipleHypothesisFilter) -> dict[str, Any]:
                 "appearance": appearance,
                 "can_appear": bool(spec.new_frequency > 0.0 or spec.appearance),
                 "kick_probability": float(spec.kick_probability),
+                "confidence_decay": float(spec.confidence_decay),
+                "looking_decay": float(spec.looking_decay),
+                "confidence_decay_distance": float(spec.confidence_decay_distance),
             }
         )
     detectors = []
@@ -98,6 +101,7 @@ def tables(mhf: MultipleHypothesisFilter) -> dict[str, Any]:
                 "position": None
                 if detector.position is None
                 else [float(v) for v in detector.position],
+                "confidence": float(detector.confidence),
             }
         )
     world = knowledge.world
@@ -185,15 +189,13 @@ def _listed(position: tuple[float, ...] | None) -> list[float] | None:
 
 
 class _Made:
-    """Python values made from one core state, reused for the next: a cluster or a
-    version made for a state is the same value in any state that shares it (the core
-    shares them by reference, and a shared one has the same address while both states
-    live; this keeps the state it was made for alive)."""
+    """Python values made from core states, reused for later ones. A cluster is named by
+    its address, valid while a state holding it lives (``cluster_state`` keeps the last
+    one read alive); a version by its serial number, unique for the whole run."""
 
     def __init__(self) -> None:
         self.cluster_state: _core.State | None = None
         self.clusters: dict[int, Cluster] = {}
-        self.track_state: _core.State | None = None
         self.tracks: dict[int, Track] = {}
 
 
@@ -247,6 +249,18 @@ class CoreState:
             self._observed = observed_from_core(self.core.observed())
         return self._observed
 
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickled as the specification's :class:`MHFState` (snapshots): the core state
+        lives in this process only; the Rust engine takes it back on its next scan."""
+        python = self.python()
+        return (
+            MHFState,
+            (
+                python.clusters, python.tracks, python.time, python.next_key,
+                python.existence, python.observed,
+            ),
+        )  # fmt: skip
+
     def python(self) -> MHFState:
         """The same state as the specification's values."""
         if self._python is None:
@@ -272,12 +286,13 @@ class CoreState:
         return self.python().hypotheses
 
 
-AnyState = MHFState | CoreState
-
-
-def as_python(state: AnyState) -> MHFState:
+def as_python(state: StateView) -> MHFState:
     """``state`` as the specification's :class:`MHFState`."""
-    return state.python() if isinstance(state, CoreState) else state
+    if isinstance(state, MHFState):
+        return state
+    if isinstance(state, CoreState):
+        return state.python()
+    raise TypeError(f"not a filter state: {type(state).__name__}")
 
 
 class CoreEngine:
@@ -296,7 +311,7 @@ class CoreEngine:
 
     # ------------------------------------------------------------------ scans
     def process_scan(
-        self, state: AnyState, measurements: Sequence[Measurement], view: SensorView | None
+        self, state: StateView, measurements: Sequence[Measurement], view: SensorView | None
     ) -> CoreState:
         core = self.to_core(state)
         rows = [self._row(m) for m in measurements]
@@ -330,7 +345,7 @@ class CoreEngine:
             None if view.detector is None else self.detectors[view.detector],
         )
 
-    def to_core(self, state: AnyState) -> _core.State:
+    def to_core(self, state: StateView) -> _core.State:
         """The core's state of ``state`` (made from the specification's values unless it
         is this engine's)."""
         if isinstance(state, CoreState) and state.engine is self:
@@ -376,21 +391,37 @@ class CoreEngine:
         return tuple(result)
 
     def _tracks_of(self, core: _core.State) -> tuple[dict[int, Track], dict[int, float]]:
-        made = self._made
-        keys, ids, existence = core.entries()
-        missing = [k for k, vid in zip(keys, ids, strict=True) if vid not in made.tracks]
-        made_now = iter(self._versions(core, missing)) if missing else iter(())
-        tracks: dict[int, Track] = {}
-        by_id: dict[int, Track] = {}
-        for key, vid in zip(keys, ids, strict=True):
-            track = made.tracks.get(vid)
-            if track is None:
-                track = next(made_now)
-            tracks[key] = track
-            by_id[vid] = track
-        made.tracks = by_id
-        made.track_state = core
+        keys, serials, existence = core.entries()
+        tracks = dict(zip(keys, self._made_tracks(core, keys, serials), strict=True))
         return tracks, dict(zip(keys, existence, strict=True))
+
+    def tracks_of(self, state: CoreState, keys: list[int]) -> list[Track]:
+        """The versions of ``keys`` in ``state`` as Python values."""
+        return self._made_tracks(state.core, keys, state.core.serials(keys))
+
+    def _made_tracks(self, core: _core.State, keys: list[int], serials: list[int]) -> list[Track]:
+        made = self._made.tracks
+        missing = [k for k, serial in zip(keys, serials, strict=True) if serial not in made]
+        made_now = iter(self._versions(core, missing)) if missing else iter(())
+        result = []
+        for serial in serials:
+            track = made.get(serial)
+            if track is None:
+                track = made[serial] = next(made_now)
+            result.append(track)
+        if len(made) > 2 * max(1024, core.track_count):  # forget versions long gone
+            _, alive, _ = core.entries()
+            self._made.tracks = {serial: made[serial] for serial in alive if serial in made}
+        return result
+
+    def current(
+        self, state: CoreState, shown: list[int], ids: Mapping[int, int]
+    ) -> dict[int, Track]:
+        """``WorldModel._current`` of ``state``: lineage -> the version shown
+        (``core/src/world.rs``); ``shown`` the lineages published now, ``ids`` theirs."""
+        pairs = self.engine.current(state.core, shown, list(ids.items()))
+        tracks = self.tracks_of(state, [key for _, key in pairs])
+        return {lineage: track for (lineage, _), track in zip(pairs, tracks, strict=True)}
 
     def _versions(self, core: _core.State, keys: list[int]) -> Iterator[Track]:
         names = self.names

@@ -37,6 +37,7 @@ from semwm.filters.small import largest_eigenvalue
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf.association import Associator, DetectionOptions, SettledUpdate
+from semwm.mhf.core_engine import CoreEngine, as_python
 from semwm.mhf.existence import looked_at, near_rate, region_margins
 from semwm.mhf.kernels import existence_kernels
 from semwm.mhf.measurement import Measurement, SensorView
@@ -45,7 +46,7 @@ from semwm.mhf.prune import log_add, merge, prune
 from semwm.mhf.rates import MIN_EVIDENCE_SCANS, ObservedRates, ScanCoverage
 from semwm.mhf.rust_expansion import ScanExpander
 from semwm.mhf.similar import merge_similar
-from semwm.mhf.state import Cluster, Hypothesis, MHFState, Track
+from semwm.mhf.state import Cluster, Hypothesis, MHFState, StateView, Track
 
 _NO_LIMITS = (math.inf, math.inf)
 
@@ -183,8 +184,10 @@ class MultipleHypothesisFilter:
             )
             for name, spec in knowledge.classes.items()
         }
+        # the Rust engine runs the whole scan in the core (made last: it reads the above)
+        self._core = CoreEngine(self) if self.kernels.engine == "rust" else None
 
-    def predict(self, state: MHFState, keys: Sequence[int], time: float) -> Predicted:
+    def predict(self, state: StateView, keys: Sequence[int], time: float) -> Predicted:
         return predict_tracks([state.tracks[k] for k in keys], time, self.factory)
 
     def leave_rates(self, predicted: Predicted) -> FloatArray:
@@ -303,7 +306,7 @@ class MultipleHypothesisFilter:
 
     def existence_at(
         self,
-        state: MHFState,
+        state: StateView,
         predicted: Predicted,
         time: float,
         scan: ScanCoverage | None = None,
@@ -370,15 +373,22 @@ class MultipleHypothesisFilter:
 
     def process_scan(
         self,
-        state: MHFState,
+        state: StateView,
         measurements: Sequence[Measurement],
         view: SensorView | None = None,
-    ) -> MHFState:
+    ) -> StateView:
         """Process one scan: detections sharing a source and a time. With ``view`` (where
         the sensor looked) the scan may be empty, and objects in view that it does not
-        report lose existence (:func:`semwm.mhf.existence.looked_at`)."""
+        report lose existence (:func:`semwm.mhf.existence.looked_at`).
+
+        With the Rust engine the whole scan runs in the core
+        (:mod:`semwm.mhf.core_engine`, ``core/src/mhf/filter.rs``), whose state stays
+        there; this method is its specification."""
         if not measurements and view is None:
             return state
+        if self._core is not None:
+            return self._core.process_scan(state, measurements, view)
+        state = as_python(state)
         time = measurements[0].time if measurements else view.time  # type: ignore[union-attr]
         keys = list(state.tracks)
         predicted = self.predict(state, keys, time)

@@ -13,7 +13,7 @@ import heapq
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 from semwm.filters.motion import FloatArray
 from semwm.mhf.rates import ObservedRates
@@ -114,6 +114,42 @@ class Cluster(NamedTuple):
     @staticmethod
     def of(hypotheses: tuple[Hypothesis, ...]) -> Cluster:
         return Cluster(hypotheses, frozenset().union(*(h.tracks for h in hypotheses)))
+
+
+class StateView(Protocol):
+    """What reading a filter state needs: :class:`MHFState` (the Python engine's), or
+    the Rust engine's state kept in the core
+    (:class:`semwm.mhf.core_engine.CoreState`). Read-only: a step of the filter
+    returns a new state."""
+
+    @property
+    def clusters(self) -> tuple[Cluster, ...]: ...
+
+    @property
+    def tracks(self) -> Mapping[int, Track]: ...
+
+    @property
+    def time(self) -> float | None: ...
+
+    @property
+    def next_key(self) -> int: ...
+
+    @property
+    def existence(self) -> Mapping[int, float]: ...
+
+    @property
+    def observed(self) -> ObservedRates: ...
+
+    @property
+    def best(self) -> Hypothesis: ...
+
+    @property
+    def hypothesis_count(self) -> int: ...
+
+    @property
+    def log10_joint_count(self) -> float: ...
+
+    def top(self, k: int) -> list[Hypothesis]: ...
 
 
 @dataclass(frozen=True)

@@ -101,6 +101,44 @@ fn lu_factor(a: &mut [f64], d: usize, pivot: &mut [usize]) -> KernelResult<()> {
     Ok(())
 }
 
+/// The sign and `log |det A|` of a `d x d` matrix (`numpy.linalg.slogdet`), from an LU
+/// factorisation with partial pivoting: `(0, -inf)` for a singular one.
+pub fn slogdet(a: &[f64], d: usize) -> (f64, f64) {
+    let mut lu = [0.0; 36];
+    lu[..d * d].copy_from_slice(&a[..d * d]);
+    let mut pivot = [0usize; 6];
+    if lu_factor(&mut lu[..d * d], d, &mut pivot[..d]).is_err() {
+        return (0.0, f64::NEG_INFINITY);
+    }
+    let mut sign = 1.0;
+    let mut log_det = 0.0;
+    for i in 0..d {
+        let u = lu[i * d + i];
+        if u < 0.0 {
+            sign = -sign;
+        }
+        log_det += u.abs().ln();
+    }
+    // the permutation's parity
+    let mut seen = [false; 6];
+    for start in 0..d {
+        if seen[start] {
+            continue;
+        }
+        let mut length = 0;
+        let mut at = start;
+        while !seen[at] {
+            seen[at] = true;
+            at = pivot[at];
+            length += 1;
+        }
+        if length % 2 == 0 {
+            sign = -sign;
+        }
+    }
+    (sign, log_det)
+}
+
 /// Solve `A x = b` in place of `b` from an LU factorisation.
 fn lu_solve(lu: &[f64], d: usize, pivot: &[usize], b: &mut [f64]) {
     let mut permuted = [0.0; 6];

@@ -32,7 +32,8 @@ use crate::mhf::hypotheses::{fsum, prune, Cluster, Hypothesis, KeyMap, KeySet, M
 use crate::mhf::measurement::{Measurement, SensorView};
 use crate::mhf::predict::{predict, Predicted};
 use crate::mhf::rates::{watched, Name, ObservedRates, ScanCoverage, ScanReport, WatchedObject};
-use crate::mhf::state::{Entry, Key, State, Version};
+use crate::mhf::similar::merge_similar;
+use crate::mhf::state::{next_serial, Entry, Key, State, Version};
 use crate::mhf::tables::Tables;
 
 /// The largest eigenvalue of a symmetric `d x d` matrix (`largest_eigenvalue`: closed
@@ -586,7 +587,7 @@ impl Filter {
         if tables.merge_distance > 0.0 {
             for cluster in final_clusters.iter_mut().skip(expanded.untouched) {
                 if cluster.hypotheses.len() > 1 {
-                    let merged = twins(
+                    let merged = merge_similar(
                         &cluster.hypotheses,
                         &table.versions,
                         &table.existence,
@@ -610,7 +611,18 @@ impl Filter {
         for key in &referenced {
             let version = table.version(*key)?.clone();
             let existence = table.existence.get(key).copied().unwrap_or(1.0);
-            tracks.insert(*key, Entry { version, existence });
+            let serial = match state.tracks.get(key) {
+                Some(old) if Arc::ptr_eq(&old.version, &version) => old.serial,
+                _ => next_serial(),
+            };
+            tracks.insert(
+                *key,
+                Entry {
+                    version,
+                    existence,
+                    serial,
+                },
+            );
         }
         let mut observed = state.observed.clone();
         if (tables.observed_rates || tables.missed_detections)
@@ -1003,17 +1015,4 @@ fn common(hypotheses: &[Hypothesis]) -> bool {
             .iter()
             .all(|h| h.keys.binary_search(k).is_ok())
     })
-}
-
-// IN PROGRESS: crate::mhf::similar::merge_similar (being ported); until it lands the
-// Rust engine is not complete and is not used.
-fn twins(
-    _hypotheses: &[Hypothesis],
-    _versions: &KeyMap<Key, Arc<Version>>,
-    _existence: &KeyMap<Key, f64>,
-    _max_distance: f64,
-) -> KernelResult<Option<Vec<Hypothesis>>> {
-    Err(KernelError::Value(
-        "twin merging is not ported yet".to_string(),
-    ))
 }

@@ -8,6 +8,7 @@
 //! window keeps cost only what changed, and a rejected batch leaves the state untouched.
 
 use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 use crate::mhf::hypotheses::Cluster;
@@ -86,11 +87,21 @@ impl Version {
     }
 }
 
-/// A version in the track table, with its existence probability at the state's time.
+/// A version in the track table, with its existence probability at the state's time
+/// and a serial number that names the version for as long as the process runs (the
+/// same in every state that holds it; Python caches the values it made by it).
 #[derive(Debug, Clone)]
 pub struct Entry {
     pub version: Arc<Version>,
     pub existence: f64,
+    pub serial: u64,
+}
+
+static SERIAL: AtomicU64 = AtomicU64::new(1);
+
+/// A serial number no entry has had.
+pub fn next_serial() -> u64 {
+    SERIAL.fetch_add(1, Ordering::Relaxed)
 }
 
 /// The whole filter (`MHFState`): independent clusters of hypotheses (each most probable

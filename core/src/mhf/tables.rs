@@ -73,6 +73,11 @@ pub struct ClassSpec {
     pub can_appear: bool,
     /// Paper 004 IV-B: the prior that a reported kick connected.
     pub kick_probability: f64,
+    /// Paper 004's confidence: its decay while unseen (1/s), while a view looks at it
+    /// and does not report it (1/s), and per metre its observer moved (1/m).
+    pub confidence_decay: f64,
+    pub looking_decay: f64,
+    pub confidence_decay_distance: f64,
 }
 
 /// One detector of the knowledge.
@@ -88,6 +93,8 @@ pub struct DetectorSpec {
     /// Declared static: it sees the whole region (or `range` around `position`).
     pub fixed: bool,
     pub position: Option<Vec<f64>>,
+    /// The confidence a detection of it sets (paper 004).
+    pub confidence: f64,
 }
 
 /// The filter's settings and the knowledge's numeric tables.

@@ -17,10 +17,10 @@ use pyo3::types::{PyDict, PyList};
 use crate::error::KernelError;
 use crate::mhf::existence::View;
 use crate::mhf::filter::Filter;
-use crate::mhf::hypotheses::{Cluster, Hypothesis};
+use crate::mhf::hypotheses::{Cluster, Hypothesis, KeyMap, KeySet};
 use crate::mhf::measurement::{Measurement, SensorView};
 use crate::mhf::rates::Name;
-use crate::mhf::state::{Entry, FilterState, State, Version};
+use crate::mhf::state::{next_serial, Entry, FilterState, State, Version};
 use crate::mhf::tables::{Appearance, ClassSpec, DetectorSpec, LeaveRelation, Tables};
 use crate::python::rates::PyObservedRates;
 use crate::python::{run, PyClassFilter};
@@ -87,6 +87,9 @@ fn class_spec(class: &Bound<'_, PyDict>) -> PyResult<ClassSpec> {
         appearance,
         can_appear: item(class, "can_appear")?,
         kick_probability: item(class, "kick_probability")?,
+        confidence_decay: item(class, "confidence_decay")?,
+        looking_decay: item(class, "looking_decay")?,
+        confidence_decay_distance: item(class, "confidence_decay_distance")?,
     })
 }
 
@@ -98,6 +101,7 @@ fn detector_spec(detector: &Bound<'_, PyDict>) -> PyResult<DetectorSpec> {
         range: item(detector, "range")?,
         fixed: item(detector, "fixed")?,
         position: item(detector, "position")?,
+        confidence: item(detector, "confidence")?,
     })
 }
 
@@ -184,6 +188,90 @@ type VersionRow = (
 /// A cluster as it crosses: its hypotheses (log weight, keys, rate).
 type ClusterRow = Vec<(f64, Vec<u64>, f64)>;
 
+fn sensor_view(row: ViewRow) -> SensorView {
+    let (time, source, (x, y), heading, range, half_angle, looking_at, detector) = row;
+    SensorView {
+        time,
+        source: Name::from(source),
+        view: View {
+            position: [x, y],
+            heading,
+            range,
+            half_angle,
+        },
+        looking_at,
+        detector,
+    }
+}
+
+/// The confidence book (`semwm.confidence.ConfidenceBook`) kept in the core.
+#[pyclass(frozen, name = "Book", module = "semwm._core")]
+pub struct PyBook {
+    book: Arc<crate::confidence::Book>,
+}
+
+/// A lineage's confidence value and since when; a source's pose; a source's last scan.
+type BookRows = (
+    Vec<(u64, f64, f64)>,
+    Vec<(String, f64, f64)>,
+    Vec<(String, f64)>,
+);
+
+#[pymethods]
+impl PyBook {
+    #[new]
+    fn new() -> Self {
+        PyBook {
+            book: Arc::new(crate::confidence::Book::default()),
+        }
+    }
+
+    /// A book from plain rows (`state`'s layout).
+    #[staticmethod]
+    fn of(
+        values: Vec<(u64, f64, f64)>,
+        poses: Vec<(String, f64, f64)>,
+        scans: Vec<(String, f64)>,
+    ) -> Self {
+        let book = crate::confidence::Book {
+            values: values.into_iter().map(|(l, v, t)| (l, (v, t))).collect(),
+            poses: poses
+                .into_iter()
+                .map(|(s, x, y)| (Name::from(s), (x, y)))
+                .collect(),
+            scans: scans.into_iter().map(|(s, t)| (Name::from(s), t)).collect(),
+        };
+        PyBook {
+            book: Arc::new(book),
+        }
+    }
+
+    /// The book as plain rows: values (lineage, value, since) in lineage order, poses,
+    /// scans.
+    fn state(&self) -> BookRows {
+        let book = &self.book;
+        let mut values: Vec<(u64, f64, f64)> =
+            book.values.iter().map(|(l, (v, t))| (*l, *v, *t)).collect();
+        values.sort_by_key(|row| row.0);
+        (
+            values,
+            book.poses
+                .iter()
+                .map(|(s, (x, y))| (s.to_string(), *x, *y))
+                .collect(),
+            book.scans
+                .iter()
+                .map(|(s, t)| (s.to_string(), *t))
+                .collect(),
+        )
+    }
+
+    /// A lineage's (value, since), if the book holds it.
+    fn entry(&self, lineage: u64) -> Option<(f64, f64)> {
+        self.book.values.get(&lineage).copied()
+    }
+}
+
 /// The filter of one knowledge base, its whole scan in the core.
 #[pyclass(frozen, name = "Engine", module = "semwm._core")]
 pub struct PyEngine {
@@ -240,20 +328,7 @@ impl PyEngine {
                 time_std,
             });
         }
-        let view = view.map(
-            |(time, source, (x, y), heading, range, half_angle, looking_at, detector)| SensorView {
-                time,
-                source: Name::from(source),
-                view: View {
-                    position: [x, y],
-                    heading,
-                    range,
-                    half_angle,
-                },
-                looking_at,
-                detector,
-            },
-        );
+        let view = view.map(sensor_view);
         let filter = self.filter.clone();
         let before = state.state.clone();
         let after = run(py, "Engine.process_scan", move || {
@@ -261,6 +336,65 @@ impl PyEngine {
         })?;
         Ok(PyState {
             state: Arc::new(after),
+        })
+    }
+
+    /// The published world of `state` (`WorldModel._current`): `(lineage, key)` of each
+    /// object shown, in the specification's order; `shown` the lineages published now,
+    /// `ids` their ids.
+    fn current(
+        &self,
+        py: Python<'_>,
+        state: &PyState,
+        shown: Vec<u64>,
+        ids: Vec<(u64, i64)>,
+    ) -> PyResult<Vec<(u64, u64)>> {
+        let filter = self.filter.clone();
+        let state = state.state.clone();
+        run(py, "Engine.current", move || {
+            let shown: KeySet<u64> = shown.into_iter().collect();
+            let ids: KeyMap<u64, i64> = ids.into_iter().collect();
+            Ok(crate::world::current(&state, &filter.tables, &shown, &ids))
+        })
+    }
+
+    /// The confidence book after one scan (`semwm.confidence.advance`; `state` is the
+    /// filter after it): `detectors` the scan's detections' detector indices, `view` its
+    /// sensor view, `source` the view's source (`None` when it names none).
+    #[pyo3(signature = (book, state, detectors, view=None, source=None))]
+    fn advance(
+        &self,
+        py: Python<'_>,
+        book: &PyBook,
+        state: &PyState,
+        detectors: Vec<usize>,
+        view: Option<ViewRow>,
+        source: Option<String>,
+    ) -> PyResult<PyBook> {
+        let filter = self.filter.clone();
+        let (before, state) = (book.book.clone(), state.state.clone());
+        if let Some(&bad) = detectors
+            .iter()
+            .find(|&&d| d >= filter.tables.detectors.len())
+        {
+            return Err(PyValueError::new_err(format!(
+                "detectors: no detector {bad}"
+            )));
+        }
+        let view = view.map(sensor_view);
+        let source = source.map(Name::from);
+        let after = run(py, "Engine.advance", move || {
+            crate::confidence::advance(
+                &before,
+                &state,
+                &detectors,
+                view.as_ref(),
+                source.as_ref(),
+                &filter.tables,
+            )
+        })?;
+        Ok(PyBook {
+            book: Arc::new(after),
         })
     }
 
@@ -359,6 +493,7 @@ impl PyState {
                 Entry {
                     version: Arc::new(version),
                     existence,
+                    serial: next_serial(),
                 },
             );
         }
@@ -446,17 +581,27 @@ impl PyState {
             .collect()
     }
 
-    /// Every version's key, identity (as `cluster_ids`) and existence, in key order.
-    fn entries(&self) -> (Vec<u64>, Vec<usize>, Vec<f64>) {
+    /// Every version's key, serial number and existence, in key order.
+    fn entries(&self) -> (Vec<u64>, Vec<u64>, Vec<f64>) {
         let tracks = &self.state.tracks;
         (
             tracks.keys().copied().collect(),
-            tracks
-                .values()
-                .map(|e| Arc::as_ptr(&e.version) as usize)
-                .collect(),
+            tracks.values().map(|e| e.serial).collect(),
             tracks.values().map(|e| e.existence).collect(),
         )
+    }
+
+    /// The serial numbers of the versions of `keys`.
+    fn serials(&self, keys: Vec<u64>) -> PyResult<Vec<u64>> {
+        keys.iter()
+            .map(|key| {
+                self.state
+                    .tracks
+                    .get(key)
+                    .map(|e| e.serial)
+                    .ok_or_else(|| PyValueError::new_err(format!("no version {key} in this state")))
+            })
+            .collect()
     }
 
     /// The versions of `keys` as rows: (key, lineage, class index, label), (x `(M, n)`,
@@ -475,6 +620,31 @@ impl PyState {
                 version_row(py, entry)
             })
             .collect()
+    }
+
+    /// Every lineage the state holds.
+    fn lineages(&self) -> Vec<u64> {
+        let mut lineages: Vec<u64> = self
+            .state
+            .tracks
+            .values()
+            .map(|e| e.version.lineage)
+            .collect();
+        lineages.sort_unstable();
+        lineages.dedup();
+        lineages
+    }
+
+    /// The keys of the most probable hypothesis (every cluster's first), sorted.
+    fn best_keys(&self) -> Vec<u64> {
+        let mut keys: Vec<u64> = self
+            .state
+            .clusters
+            .iter()
+            .flat_map(|c| c.hypotheses[0].keys.iter().copied())
+            .collect();
+        keys.sort_unstable();
+        keys
     }
 
     /// The observed rates.

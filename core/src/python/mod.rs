@@ -970,5 +970,6 @@ fn semwm_core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<crate::python::rates::PyObservedRates>()?;
     module.add_class::<engine::PyEngine>()?;
     module.add_class::<engine::PyState>()?;
+    module.add_class::<engine::PyBook>()?;
     Ok(())
 }

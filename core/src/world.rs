@@ -1,0 +1,340 @@
+//! The published world of a state, as `semwm/world.py` computes it for its ids
+//! (`WorldModel._current`, `_stored_summaries`, `_same_objects`, `_coinciding`), which is
+//! the specification: each object's marginal existence over the hypotheses, the version
+//! shown for it, and lineages that are one physical object grouped.
+//!
+//! ```text
+//! r(l) = sum_h p(h) sum_{v in h, lineage(v) = l} r_v P(v inside the region)
+//! 4 D_B = delta^T (P_a + P_b)^-1 delta + 2 ln det((P_a + P_b)/2) / sqrt(det P_a det P_b)
+//! ```
+//!
+//! Lineages whose estimates coincide (`4 D_B <= 1`), of compatible classes, that the most
+//! probable hypothesis does not hold both as shown, are one object whose existence is
+//! the sum of theirs (at most 1).
+
+use crate::filters::small::{mahalanobis_squared, slogdet};
+use crate::mhf::existence::inside_probability;
+use crate::mhf::hypotheses::{fsum, KeyMap, KeySet};
+use crate::mhf::state::{Key, State, Version};
+use crate::mhf::tables::Tables;
+
+/// 4 x the Bhattacharyya distance under which two lineages' estimates coincide.
+pub const SAME_OBJECT_GATE: f64 = 1.0;
+/// Lineages less likely than this are not grouped.
+pub const GROUPING_FLOOR: f64 = 1e-3;
+
+/// A stored version's combined position `d` and covariance `d x d` (no prediction, and
+/// no spread of the modes' means: `_stored_positions`) and its probability of being
+/// inside the region widened by its class's margins.
+#[derive(Debug, Clone)]
+pub struct Summary {
+    pub position: Vec<f64>,
+    pub covariance: Vec<f64>,
+    pub inside: f64,
+}
+
+/// `_stored_summaries` of one version.
+pub fn summary(version: &Version, tables: &Tables) -> Summary {
+    let d = tables.dim;
+    let s = &version.state;
+    let (m, n) = (s.modes, s.size);
+    let mut position = vec![0.0; d];
+    let mut covariance = vec![0.0; d * d];
+    if m == 1 {
+        position.copy_from_slice(&s.x[..d]);
+        for a in 0..d {
+            for b in 0..d {
+                covariance[a * d + b] = s.p[a * n + b];
+            }
+        }
+    } else {
+        for (a, value) in position.iter_mut().enumerate() {
+            let mut total = 0.0;
+            for j in 0..m {
+                total += s.mu[j] * s.x[j * n + a];
+            }
+            *value = total;
+        }
+        for a in 0..d {
+            for b in 0..d {
+                let mut total = 0.0;
+                for j in 0..m {
+                    total += s.mu[j] * s.p[j * n * n + a * n + b];
+                }
+                covariance[a * d + b] = total;
+            }
+        }
+    }
+    let inside = match &tables.region {
+        None => 1.0,
+        Some(region) => {
+            let low: Vec<f64> = region.iter().map(|(a, _)| *a).collect();
+            let high: Vec<f64> = region.iter().map(|(_, b)| *b).collect();
+            let margin = &tables.classes[version.cls].region_margin;
+            inside_probability(&position, &covariance, &low, &high, Some(margin))
+        }
+    };
+    Summary {
+        position,
+        covariance,
+        inside,
+    }
+}
+
+/// One object's marginal existence and the version shown for it (`_Marginal`).
+#[derive(Debug, Clone)]
+pub struct Marginal {
+    pub lineage: u64,
+    pub existence: f64,
+    pub key: Key,
+}
+
+/// Whether two Gaussian position estimates are one object (`_coinciding`): their
+/// Bhattacharyya distance is at most `SAME_OBJECT_GATE / 4`.
+pub fn coinciding(delta: &[f64], pa: &[f64], pb: &[f64], d: usize) -> bool {
+    let total: Vec<f64> = pa.iter().zip(pb).map(|(a, b)| a + b).collect();
+    let d2 = mahalanobis_squared(delta, &total, d).unwrap_or(f64::NAN);
+    let half: Vec<f64> = total.iter().map(|v| 0.5 * v).collect();
+    let (_, log_det_mean) = slogdet(&half, d);
+    let (_, log_det_a) = slogdet(pa, d);
+    let (_, log_det_b) = slogdet(pb, d);
+    let spread = 2.0 * log_det_mean - log_det_a - log_det_b;
+    d2 + spread <= SAME_OBJECT_GATE
+}
+
+/// The published world at the state's time (`WorldModel._current`): `(lineage, key)` of
+/// each object shown, in the order the specification's dict holds them. `shown`: the
+/// lineages published now; `ids`: their ids (to keep ids stable when lineages group).
+pub fn current(
+    state: &State,
+    tables: &Tables,
+    shown: &KeySet<u64>,
+    ids: &KeyMap<u64, i64>,
+) -> Vec<(u64, Key)> {
+    let version = |key: Key| &state.tracks[&key].version;
+    if !tables.mht {
+        // the most probable hypothesis's objects, in key order
+        let mut best: Vec<Key> = state
+            .clusters
+            .iter()
+            .flat_map(|c| c.hypotheses[0].keys.iter().copied())
+            .collect();
+        best.sort_unstable();
+        let mut result: Vec<(u64, Key)> = Vec::new();
+        let mut at: KeyMap<u64, usize> = KeyMap::default();
+        for key in best {
+            let lineage = version(key).lineage;
+            match at.get(&lineage) {
+                Some(&i) => result[i].1 = key,
+                None => {
+                    at.insert(lineage, result.len());
+                    result.push((lineage, key));
+                }
+            }
+        }
+        return result;
+    }
+    if state.time.is_none() {
+        return Vec::new();
+    }
+    let floor = tables.min_existence;
+    let mut summaries: KeyMap<Key, Summary> = KeyMap::default();
+    let mut totals: Vec<(u64, f64)> = Vec::new();
+    let mut total_at: KeyMap<u64, usize> = KeyMap::default();
+    let mut chosen: KeyMap<u64, Key> = KeyMap::default();
+    let mut present_in: KeySet<u64> = KeySet::default();
+    for cluster in &state.clusters {
+        // each version's probability mass, in order of first appearance
+        let mut mass: Vec<(Key, f64)> = Vec::new();
+        let mut mass_at: KeyMap<Key, usize> = KeyMap::default();
+        for h in &cluster.hypotheses {
+            let p = h.log_weight.exp();
+            for &key in &h.keys {
+                match mass_at.get(&key) {
+                    Some(&i) => mass[i].1 += p,
+                    None => {
+                        mass_at.insert(key, mass.len());
+                        mass.push((key, 0.0 + p));
+                    }
+                }
+            }
+        }
+        for (key, p) in mass {
+            let entry = &state.tracks[&key];
+            let lineage = entry.version.lineage;
+            let inside = summaries
+                .entry(key)
+                .or_insert_with(|| summary(&entry.version, tables))
+                .inside;
+            let present = entry.existence * inside;
+            match total_at.get(&lineage) {
+                Some(&i) => totals[i].1 += p * present,
+                None => {
+                    total_at.insert(lineage, totals.len());
+                    totals.push((lineage, 0.0 + p * present));
+                }
+            }
+            if present >= floor && !present_in.contains(&lineage) {
+                present_in.insert(lineage);
+                chosen.insert(lineage, key);
+            }
+            chosen.entry(lineage).or_insert(key);
+        }
+    }
+    let marginals: Vec<Marginal> = totals
+        .iter()
+        .map(|&(lineage, existence)| Marginal {
+            lineage,
+            existence,
+            key: chosen[&lineage],
+        })
+        .collect();
+    let merged = same_objects(marginals, state, tables, &summaries, shown, ids);
+    merged
+        .into_iter()
+        .filter(|m| m.existence >= floor)
+        .map(|m| (m.lineage, m.key))
+        .collect()
+}
+
+/// One entry per physical object (`WorldModel._same_objects`): see the module docs.
+fn same_objects(
+    marginals: Vec<Marginal>,
+    state: &State,
+    tables: &Tables,
+    summaries: &KeyMap<Key, Summary>,
+    shown: &KeySet<u64>,
+    ids: &KeyMap<u64, i64>,
+) -> Vec<Marginal> {
+    let d = tables.dim;
+    let candidates: Vec<usize> = (0..marginals.len())
+        .filter(|&i| marginals[i].existence >= GROUPING_FLOOR)
+        .collect();
+    if candidates.len() < 2 {
+        return marginals;
+    }
+    let best_keys: KeySet<Key> = state
+        .clusters
+        .iter()
+        .flat_map(|c| c.hypotheses[0].keys.iter().copied())
+        .collect();
+    let together: KeySet<u64> = candidates
+        .iter()
+        .filter(|&&i| best_keys.contains(&marginals[i].key))
+        .map(|&i| marginals[i].lineage)
+        .collect();
+    if together.len() == candidates.len() {
+        return marginals; // the most probable hypothesis holds each as shown
+    }
+    let count = candidates.len();
+    let mut parent: Vec<usize> = (0..count).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    let summary = |i: usize| &summaries[&marginals[candidates[i]].key];
+    let spread: Vec<f64> = (0..count)
+        .map(|i| {
+            let p = &summary(i).covariance;
+            let mut total = 0.0;
+            for a in 0..d {
+                total += p[a * d + a];
+            }
+            total
+        })
+        .collect();
+    let k = tables.class_count();
+    for a in 0..count {
+        for b in a + 1..count {
+            let (sa, sb) = (summary(a), summary(b));
+            let delta: Vec<f64> = (0..d).map(|i| sa.position[i] - sb.position[i]).collect();
+            let mut squared = 0.0;
+            for value in &delta {
+                squared += value * value;
+            }
+            if squared > SAME_OBJECT_GATE * (spread[a] + spread[b]) {
+                continue;
+            }
+            if !coinciding(&delta, &sa.covariance, &sb.covariance, d) {
+                continue;
+            }
+            let (first, second) = (&marginals[candidates[a]], &marginals[candidates[b]]);
+            if together.contains(&first.lineage) && together.contains(&second.lineage) {
+                continue; // the most probable hypothesis holds both: two objects
+            }
+            let (ca, cb) = (
+                state.tracks[&first.key].version.cls,
+                state.tracks[&second.key].version.cls,
+            );
+            if !tables.compatible[ca * k + cb] {
+                continue;
+            }
+            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+            parent[ra] = rb;
+        }
+    }
+    // groups in order of their first member
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    let mut group_of_root: KeyMap<u64, usize> = KeyMap::default();
+    for i in 0..count {
+        let r = root(&mut parent, i) as u64;
+        match group_of_root.get(&r) {
+            Some(&g) => groups[g].push(i),
+            None => {
+                group_of_root.insert(r, groups.len());
+                groups.push(vec![i]);
+            }
+        }
+    }
+    let mut result: Vec<Option<Marginal>> = marginals.iter().cloned().map(Some).collect();
+    let mut appended: Vec<Marginal> = Vec::new();
+    for members in groups.iter().filter(|g| g.len() > 1) {
+        let with_id: Vec<usize> = members
+            .iter()
+            .copied()
+            .filter(|&i| shown.contains(&marginals[candidates[i]].lineage))
+            .collect();
+        let best = if !with_id.is_empty() {
+            // min by (not together, id): the first of the smallest
+            let mut best = with_id[0];
+            let key = |i: usize| {
+                let lineage = marginals[candidates[i]].lineage;
+                (
+                    !together.contains(&lineage),
+                    ids.get(&lineage).copied().unwrap_or(0),
+                )
+            };
+            for &i in &with_id[1..] {
+                if key(i) < key(best) {
+                    best = i;
+                }
+            }
+            best
+        } else {
+            // max by (existence, -lineage): the first of the largest
+            let mut best = members[0];
+            for &i in &members[1..] {
+                let (m, top) = (&marginals[candidates[i]], &marginals[candidates[best]]);
+                if (m.existence, -(m.lineage as i128)) > (top.existence, -(top.lineage as i128)) {
+                    best = i;
+                }
+            }
+            best
+        };
+        let total = fsum(members.iter().map(|&i| marginals[candidates[i]].existence)).min(1.0);
+        for &i in members {
+            result[candidates[i]] = None;
+        }
+        appended.push(Marginal {
+            existence: total,
+            ..marginals[candidates[best]].clone()
+        });
+    }
+    // deleted members leave their places; each group's entry goes to the end, in order
+    let mut out: Vec<Marginal> = result.into_iter().flatten().collect();
+    out.extend(appended);
+    out
+}
