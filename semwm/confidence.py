@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -64,6 +64,13 @@ def state_of(value: float, spec: ResolvedClass) -> ConfidenceState:
 MAX_LOOK = 1.0
 """s: the longest interval one scan's look counts for (a source silent longer than
 this did not keep looking)."""
+
+
+class BookView(Protocol):
+    """What reading confidences needs: :class:`ConfidenceBook`, or the Rust engine's
+    book kept in the core (:class:`semwm.mhf.core_engine.CoreBook`)."""
+
+    def at(self, lineage: int, time: float, spec: ResolvedClass) -> float: ...
 
 
 @dataclass(frozen=True)

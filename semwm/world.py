@@ -30,6 +30,7 @@ from scipy.optimize import linear_sum_assignment
 from semwm.collector import collector_paused
 from semwm.confidence import (
     CONFIDENCE_STATES,
+    BookView,
     Confidence,
     ConfidenceBook,
     advance,
@@ -52,7 +53,7 @@ from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf import nearby
 from semwm.mhf.actions import Kick, apply_kick
-from semwm.mhf.core_engine import CoreState, as_python
+from semwm.mhf.core_engine import CoreState, as_python, as_python_book
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted
@@ -130,7 +131,7 @@ class _LoggedScan:
     measurements: tuple[Measurement, ...]
     before: StateView
     view: SensorView | None = None
-    book: ConfidenceBook = field(default_factory=ConfidenceBook)
+    book: BookView = field(default_factory=ConfidenceBook)
 
 
 _log_key = attrgetter("key")
@@ -148,7 +149,7 @@ class _Held:
 
 _Tables = tuple[dict[int, int], int, dict[int, "_Published"], dict[int, "_Published"]]
 """The id tables: lineage -> id, the next id, the published and the lost objects."""
-_Link = tuple[_Held, StateView, ConfidenceBook, _Tables]
+_Link = tuple[_Held, StateView, BookView, _Tables]
 
 
 @dataclass(frozen=True)
@@ -159,7 +160,7 @@ class _Tentative:
     committed as it is (no second run)."""
 
     base: StateView
-    base_book: ConfidenceBook
+    base_book: BookView
     base_tables: _Tables
     chain: tuple[_Link, ...]
 
@@ -306,7 +307,7 @@ class WorldModel:
     def reset(self) -> None:
         """Forget every detection and object."""
         self._state: StateView = MHFState.empty()
-        self._book = ConfidenceBook()
+        self._book: BookView = ConfidenceBook()
         self._summaries = {}
         self._log: list[_LoggedScan] = []
         self._replay_floor: _Floor | None = None  # no replay at or before this scan
@@ -547,7 +548,7 @@ class WorldModel:
         return None
 
     def _commit(
-        self, state: StateView, log: list[_LoggedScan], book: ConfidenceBook, floor: _Floor | None
+        self, state: StateView, log: list[_LoggedScan], book: BookView, floor: _Floor | None
     ) -> None:
         self._state, self._log, self._book, self._replay_floor = state, log, book, floor
 
@@ -748,7 +749,7 @@ class WorldModel:
 
     def _process(
         self, measurements: Sequence[Measurement], view: SensorView | None = None
-    ) -> tuple[StateView, list[_LoggedScan], ConfidenceBook, _Floor | None]:
+    ) -> tuple[StateView, list[_LoggedScan], BookView, _Floor | None]:
         """Process new scans in time order, replaying logged scans they precede.
 
         Returns the new state, reorder log and confidences, and the log's replay floor
@@ -759,7 +760,7 @@ class WorldModel:
 
     def _process_scans(
         self, scans: dict[ScanKey, list[Measurement]], views: dict[ScanKey, SensorView]
-    ) -> tuple[StateView, list[_LoggedScan], ConfidenceBook, _Floor | None]:
+    ) -> tuple[StateView, list[_LoggedScan], BookView, _Floor | None]:
         """:meth:`_process` of scans grouped by key (``scans`` not empty; changed here)."""
         first = min(scans)
         # the first logged scan at or after ``first`` (the log is in key order; a new
@@ -876,10 +877,10 @@ class WorldModel:
     def _step(
         self,
         state: StateView,
-        book: ConfidenceBook,
+        book: BookView,
         measurements: list[Measurement],
         view: SensorView | None,
-    ) -> tuple[StateView, ConfidenceBook]:
+    ) -> tuple[StateView, BookView]:
         """One scan processed: the MHF (paper 002) and the confidences (paper 004). The
         first scan of the query cache, from the same state, is taken from it: the same
         values, computed once."""
@@ -891,7 +892,14 @@ class WorldModel:
                 return after, after_book
         state = self._mhf.process_scan(state, measurements, view)
         if self._mhf.mht:
-            book = advance(book, state, measurements, view, self._knowledge, self._mhf.factory)
+            core = self._mhf._core
+            if core is not None and isinstance(state, CoreState) and state.engine is core:
+                book = core.advance(book, state, measurements, view)
+            else:
+                book = advance(
+                    as_python_book(book), state, measurements, view, self._knowledge,
+                    self._mhf.factory,
+                )  # fmt: skip
         return state, book
 
     # ------------------------------------------------------------------ ids
@@ -1185,7 +1193,7 @@ class WorldModel:
             result[best] = marginals[best]._replace(existence=total)
         return result
 
-    def _as_of(self, at: float) -> tuple[StateView, ConfidenceBook]:
+    def _as_of(self, at: float) -> tuple[StateView, BookView]:
         """The state and confidences as they were at ``at`` (s): the current ones from the
         newest scan on; before it, the ones after the last scan at or before ``at``, from
         the reorder history. Raises :class:`BeforeHistoryError` when the history does not
@@ -1379,7 +1387,7 @@ class WorldModel:
         existence: float,
         at: float,
         rows: tuple[list[list[float]], list[list[list[float]]]],
-        book: ConfidenceBook | None = None,
+        book: BookView | None = None,
     ) -> WorldObject:
         """``rows``: every prediction's position and covariance as Python floats;
         ``book``: the confidences to read (default: the current ones)."""
@@ -1423,7 +1431,7 @@ class WorldModel:
         )
 
     def confidence_of(
-        self, track: Track, time: float, book: ConfidenceBook | None = None
+        self, track: Track, time: float, book: BookView | None = None
     ) -> Confidence:
         """An object's confidence (paper 004) at ``time``: :mod:`semwm.confidence`."""
         spec = self._knowledge.classes[track.cls]

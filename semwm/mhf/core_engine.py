@@ -19,12 +19,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from semwm.filters import rust
+from semwm.confidence import BookView, ConfidenceBook
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.rates import FalseAlarms, ObservedRates, SourceClock, StreamCounts
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, StateView, Track
 
 if TYPE_CHECKING:
     from semwm import _core
+    from semwm.knowledge.model import ResolvedClass
     from semwm.mhf.filter import MultipleHypothesisFilter
 
 
@@ -286,6 +288,46 @@ class CoreState:
         return self.python().hypotheses
 
 
+class CoreBook:
+    """The confidence book (:class:`~semwm.confidence.ConfidenceBook`) kept in the core
+    (``core/src/confidence.rs``)."""
+
+    __slots__ = ("core",)
+
+    def __init__(self, core: _core.Book) -> None:
+        self.core = core
+
+    def at(self, lineage: int, time: float, spec: ResolvedClass) -> float:
+        """:meth:`ConfidenceBook.at`."""
+        entry = self.core.entry(lineage)
+        if entry is None:
+            return 1.0
+        value, since = entry
+        return value * math.exp(-spec.confidence_decay * max(0.0, time - since))
+
+    def python(self) -> ConfidenceBook:
+        values, poses, scans = self.core.state()
+        return ConfidenceBook(
+            {lineage: (value, since) for lineage, value, since in values},
+            {source: (x, y) for source, x, y in poses},
+            dict(scans),
+        )
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickled as the specification's :class:`ConfidenceBook` (snapshots)."""
+        book = self.python()
+        return (ConfidenceBook, (book.values, book.poses, book.scans))
+
+
+def as_python_book(book: BookView) -> ConfidenceBook:
+    """``book`` as the specification's :class:`ConfidenceBook`."""
+    if isinstance(book, ConfidenceBook):
+        return book
+    if isinstance(book, CoreBook):
+        return book.python()
+    raise TypeError(f"not a confidence book: {type(book).__name__}")
+
+
 def as_python(state: StateView) -> MHFState:
     """``state`` as the specification's :class:`MHFState`."""
     if isinstance(state, MHFState):
@@ -413,6 +455,35 @@ class CoreEngine:
             _, alive, _ = core.entries()
             self._made.tracks = {serial: made[serial] for serial in alive if serial in made}
         return result
+
+    def advance(
+        self,
+        book: BookView,
+        state: CoreState,
+        measurements: Sequence[Measurement],
+        view: SensorView | None,
+    ) -> CoreBook:
+        """:func:`semwm.confidence.advance` in the core."""
+        if isinstance(book, CoreBook):
+            core_book = book.core
+        elif isinstance(book, ConfidenceBook):
+            core_book = self._core.Book.of(
+                [(lineage, value, since) for lineage, (value, since) in book.values.items()],
+                [(source, x, y) for source, (x, y) in book.poses.items()],
+                list(book.scans.items()),
+            )
+        else:
+            raise TypeError(f"not a confidence book: {type(book).__name__}")
+        detectors = [self.detectors[m.detector] for m in measurements]
+        return CoreBook(
+            self.engine.advance(
+                core_book,
+                state.core,
+                detectors,
+                None if view is None else self._view(view),
+                None if view is None else view.source,
+            )
+        )
 
     def current(
         self, state: CoreState, shown: list[int], ids: Mapping[int, int]

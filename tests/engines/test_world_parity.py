@@ -1,8 +1,8 @@
 """Both engines give the same worlds, frame by frame, on the shipped scenarios.
 
-After every scan: the same published objects (ids, classes, labels, counts) with
-positions, velocities, covariances, existence, mode and class probabilities within
-1e-9, and the same hypotheses (count, and the 20 most probable within 1e-9). The Python
+After every scan: the same published objects (ids, classes, labels, counts,
+confidence states) with positions, velocities, covariances, existence, mode and class
+probabilities and confidences within 1e-9, and the same hypotheses (count, and the 20 most probable within 1e-9). The Python
 engine is the specification (docs/engines.md)."""
 
 from __future__ import annotations
@@ -52,6 +52,7 @@ def _numbers(obj: WorldObject) -> list[float]:
     values = [*obj.position, *(obj.velocity or ()), *sum(obj.covariance, ()), obj.existence]
     values += [*(obj.mode_probabilities or {}).values()]
     values += [*(obj.class_probabilities or {}).values()]
+    values += [] if obj.confidence is None else [obj.confidence.value]
     return values
 
 
@@ -62,6 +63,7 @@ def _keys(obj: WorldObject) -> tuple[Any, ...]:
         obj.label,
         tuple(obj.mode_probabilities or ()),
         tuple(obj.class_probabilities or ()),
+        None if obj.confidence is None else obj.confidence.state,
     )
 
 
