@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from semwm.filters import rust
 from semwm.confidence import BookView, ConfidenceBook
+from semwm.filters import rust
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.rates import FalseAlarms, ObservedRates, SourceClock, StreamCounts
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, StateView, Track
