@@ -83,6 +83,7 @@ def publish(notebook: Any, name: str, docs: Path = DOCS) -> Path:
     from nbconvert import MarkdownExporter
 
     files = f"{name}_files"
+    _coalesce_streams(notebook)
     body, resources = MarkdownExporter().from_notebook_node(
         notebook, resources={"output_files_dir": files}
     )
@@ -99,6 +100,32 @@ def publish(notebook: Any, name: str, docs: Path = DOCS) -> Path:
     out = docs / f"{name}.md"
     out.write_text(header + body, encoding="utf-8")
     return out
+
+
+def _coalesce_streams(notebook: Any) -> None:
+    """Join each cell's consecutive outputs of one stream (stdout, stderr) into one.
+
+    The kernel sends what a cell prints in pieces as time passes, so a cell that
+    prints, computes for a while and prints again may give one output or two, and
+    Markdown shows two with blank lines between: the published page would depend on
+    how fast the machine was."""
+    for cell in notebook.cells:
+        outputs = cell.get("outputs")
+        if not outputs:
+            continue
+        joined: list[Any] = []
+        for output in outputs:
+            previous = joined[-1] if joined else None
+            if (
+                previous is not None
+                and output.get("output_type") == "stream"
+                and previous.get("output_type") == "stream"
+                and previous.get("name") == output.get("name")
+            ):
+                previous["text"] = previous["text"] + output["text"]
+            else:
+                joined.append(output)
+        cell["outputs"] = joined
 
 
 REGENERATE = "python examples/render.py"

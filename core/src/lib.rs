@@ -9,6 +9,11 @@
 //! model's kernels, merging and pruning, the expansion of one scan, the observed rates). The Python engine is the specification;
 //! the parity tests (tests/engines/) hold these kernels to it.
 
+/// The extension's Rust allocations (versions, hypotheses, key sets: many small ones
+/// per scan) go to mimalloc; Python's own memory is untouched.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 pub mod confidence;
 pub mod error;
 pub mod filters;

@@ -1,15 +1,12 @@
-"""Which engine runs the numeric kernels: ``"python"`` (numpy, the specification) or
-``"rust"`` (the compiled core ``semwm._core``, built from ``core/`` by ``pip install``).
+"""Which engine runs the world model: ``"rust"`` (the compiled core ``semwm._core``,
+built from ``core/`` by ``pip install``; the default wherever it is built) or
+``"python"`` (numpy, the readable specification the Rust core is held to).
 
-The Python engine is the default until the Rust core holds parity everywhere
-(docs/engines.md). The extension is optional: where it was not built (no Rust
-toolchain at install time) :func:`rust_core` is ``None``, the Python engine runs, and
-asking for ``"rust"`` raises :class:`EngineUnavailable` with the reason.
-
-So far the Rust core holds the filters (prediction, update, combination, the
-Mahalanobis gate) and the existence and coverage kernels of the missed-detection model
-(:mod:`semwm.mhf.kernels`); the hypothesis expansion and everything else runs in Python
-with either engine.
+The Rust core runs the whole scan and keeps the filter's state between scans
+(``core/src/mhf/filter.rs``; docs/engines.md). The extension is optional: where it was
+not built (no Rust toolchain at install time) :func:`rust_core` is ``None``, the
+Python engine runs, and asking for ``"rust"`` raises :class:`EngineUnavailable` with
+the reason.
 """
 
 from __future__ import annotations
@@ -25,6 +22,7 @@ __all__ = [
     "ENGINE_ENV",
     "Engine",
     "EngineUnavailable",
+    "default_engine",
     "engine_description",
     "resolve_engine",
     "rust_core",
@@ -59,15 +57,24 @@ def rust_core_error() -> str | None:
     return _import_core()[1]
 
 
+def default_engine() -> Engine:
+    """``"rust"`` where the extension is built, else ``"python"``."""
+    return "rust" if rust_core() is not None else "python"
+
+
 def resolve_engine(engine: str | None = None) -> Engine:
-    """The engine to run: ``engine`` if given, else ``$SEMWM_ENGINE``, else ``"python"``.
+    """The engine to run: ``engine`` if given, else ``$SEMWM_ENGINE``, else
+    :func:`default_engine` (``"rust"`` where the extension is built).
 
     Raises ``ValueError`` for an unknown name and :class:`EngineUnavailable` for
     ``"rust"`` when the extension is not built.
     """
     source = "engine"
     if engine is None:
-        engine, source = os.environ.get(ENGINE_ENV) or "python", ENGINE_ENV
+        chosen = os.environ.get(ENGINE_ENV)
+        if not chosen:
+            return default_engine()
+        engine, source = chosen, ENGINE_ENV
     name = engine.strip().lower()
     if name == "python":
         return "python"

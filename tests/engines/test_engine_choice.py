@@ -18,11 +18,11 @@ from semwm.world import WorldModel
 from . import needs_rust
 
 
-def test_python_is_the_default_and_the_environment_chooses(
+def test_rust_is_the_default_where_built_and_the_environment_chooses(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.delenv("SEMWM_ENGINE", raising=False)
-    assert resolve_engine() == "python"
+    assert resolve_engine() == ("rust" if rust_core() is not None else "python")
     monkeypatch.setenv("SEMWM_ENGINE", "Python ")
     assert resolve_engine() == "python"
     monkeypatch.setenv("SEMWM_ENGINE", "numba")
