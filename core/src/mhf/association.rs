@@ -308,34 +308,34 @@ fn settled_rows(
     result
 }
 
-/// `L_class` of every (detection, object) pair, `D x T` (`_class_likelihoods`): `mht`:
-/// `sum_c p_o(c) L(C(z) | c)`; `paper`: eq. (8).
-fn class_likelihoods(
-    tables: &Tables,
-    predicted: &Predicted,
-    measurements: &[Measurement],
-) -> Vec<f64> {
-    let k = tables.class_count();
-    let t = predicted.len();
-    let mut result = vec![0.0; measurements.len() * t];
-    for (j, m) in measurements.iter().enumerate() {
-        if tables.mht {
-            let reported = classes::likelihood(tables, m.detector, m.cls);
-            for (i, row) in predicted.rows.iter().enumerate() {
-                let probs = &row.version.class_probs;
-                let mut total = 0.0;
-                for c in 0..k {
-                    total += reported[c] * probs[c];
-                }
-                result[j * t + i] = total;
-            }
-        } else {
-            for (i, row) in predicted.rows.iter().enumerate() {
-                result[j * t + i] = tables.class_likelihood[row.version.cls * k + m.cls];
-            }
+/// `L_class` of a (detection, object) pair (`_class_likelihoods`): `mht`:
+/// `sum_c p_o(c) L(C(z) | c)` (`reported`: the detection's `L(C(z) | c)`); `paper`:
+/// eq. (8).
+fn class_likelihood(tables: &Tables, reported: &[f64], m: &Measurement, version: &Version) -> f64 {
+    if tables.mht {
+        let mut total = 0.0;
+        for (l, p) in reported.iter().zip(version.class_probs.iter()) {
+            total += l * p;
         }
+        total
+    } else {
+        let k = tables.class_count();
+        tables.class_likelihood[version.cls * k + m.cls]
     }
-    result
+}
+
+/// The objects (rows) a detection at `z` may pair with, ascending: those whose first
+/// coordinate lies within `radius` of `z`'s (`order` sorts the rows by it, `first`
+/// holds the sorted coordinates). A superset of the pairs the cheap bound passes (its
+/// radius is the largest that bound allows), so the exact test decides as the
+/// specification's dense test does, in its row-major order.
+fn window(order: &[usize], first: &[f64], z: f64, radius: f64, out: &mut Vec<usize>) {
+    out.clear();
+    let reach = radius * (1.0 + 1e-9) + 1e-12;
+    let low = first.partition_point(|&x| x < z - reach);
+    let high = first.partition_point(|&x| x <= z + reach);
+    out.extend_from_slice(&order[low..high]);
+    out.sort_unstable();
 }
 
 /// Gates every (detection, object) pair and updates the pairs that pass
@@ -350,7 +350,6 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
         return Ok(found);
     }
     let mht = tables.mht;
-    let likelihood = class_likelihoods(tables, predicted, measurements);
     let timed = measurements.iter().any(|m| m.time_std > 0.0);
     let has_labels = mht && measurements.iter().any(|m| m.label.is_some());
     let label_reach = tables.label_gate * tables.label_gate;
@@ -367,19 +366,45 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
     } else {
         Vec::new()
     };
-    // the pairs that pass the cheap bound (or hold the detection's label), row-major
+    // the pairs that pass the cheap bound (or hold the detection's label), row-major:
+    // d^2 <= gate lambda_max(S) <= gate trace(S), and likelihood > 0
     struct Pair {
         j: usize,
         i: usize,
         labelled: bool,
+        likelihood: f64,
     }
     let mut pairs: Vec<Pair> = Vec::new();
     let gated = tables.gate.is_finite();
+    // rows sorted by their first coordinate, for the unlabelled detections' windows
+    let mut order: Vec<usize> = (0..t).collect();
+    order.sort_by(|&a, &b| predicted.position(a)[0].total_cmp(&predicted.position(b)[0]));
+    let first: Vec<f64> = order.iter().map(|&i| predicted.position(i)[0]).collect();
+    let widest = trace_p.iter().copied().fold(0.0, f64::max);
+    let fastest = speed2.iter().copied().fold(0.0, f64::max);
+    let mut rows: Vec<usize> = Vec::with_capacity(t);
     for (j, m) in measurements.iter().enumerate() {
         let trace_r: f64 = (0..d).map(|a| m.r[a * d + a]).sum();
         let time_var = m.time_std * m.time_std;
-        for i in 0..t {
-            let lik = likelihood[j * t + i];
+        let reported = if mht {
+            classes::likelihood(tables, m.detector, m.cls)
+        } else {
+            Vec::new()
+        };
+        let dense = !gated || (has_labels && m.label.is_some());
+        if dense {
+            rows.clear();
+            rows.extend(0..t);
+        } else {
+            let radius = (tables.gate * (widest + trace_r + time_var * fastest)).sqrt();
+            if radius.is_nan() {
+                rows.clear();
+                rows.extend(0..t);
+            } else {
+                window(&order, &first, m.z[0], radius, &mut rows);
+            }
+        }
+        for &i in &rows {
             let position = predicted.position(i);
             let mut squared = 0.0;
             for (z, x) in m.z.iter().zip(position) {
@@ -390,17 +415,25 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
                 && m.label.is_some()
                 && predicted.rows[i].version.label == m.label
                 && squared <= label_reach;
-            let mut candidate = lik > 0.0;
+            let mut near = true;
             if gated {
                 let mut bound = tables.gate * (trace_p[i] + trace_r);
                 if timed {
                     bound += tables.gate * time_var * speed2[i];
                 }
-                candidate &= squared <= bound;
-                candidate |= labelled && lik > 0.0;
+                near = squared <= bound || labelled;
             }
-            if candidate {
-                pairs.push(Pair { j, i, labelled });
+            if !near {
+                continue;
+            }
+            let likelihood = class_likelihood(tables, &reported, m, &predicted.rows[i].version);
+            if likelihood > 0.0 {
+                pairs.push(Pair {
+                    j,
+                    i,
+                    labelled,
+                    likelihood,
+                });
             }
         }
     }
@@ -515,7 +548,7 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
                 },
                 None => old.rate,
             };
-            let mut log_num = log_or_minus_inf(f_existing) + likelihood[j * t + i].ln() + log_lik;
+            let mut log_num = log_or_minus_inf(f_existing) + pair.likelihood.ln() + log_lik;
             if mht {
                 if !inputs.existence.is_empty() {
                     log_num += log_or_minus_inf(inputs.existence[i]);
