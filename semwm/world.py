@@ -53,7 +53,7 @@ from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf import nearby
 from semwm.mhf.actions import Kick, apply_kick
-from semwm.mhf.core_engine import CoreState, as_python, as_python_book
+from semwm.mhf.core_engine import CoreState, VersionRef, as_python, as_python_book, track_of
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted
@@ -169,7 +169,7 @@ class _Published(NamedTuple):
     """An object as last published: its version (positions are computed only if its id
     has to be handed over). A named tuple: one is made per published object per scan."""
 
-    track: Track
+    track: Track | VersionRef  # the Rust engine's: made into a Track only where needed
     lost_at: float | None = None  # when it left the published world
 
     @property
@@ -962,9 +962,10 @@ class WorldModel:
         spec = self._knowledge.classes.get(pub.track.cls)
         if spec is None:
             return False
-        x, P = _summary_position(pub.track, self._knowledge.world.dimension)
+        track = track_of(pub.track)
+        x, P = _summary_position(track, self._knowledge.world.dimension)
         region = self._knowledge.world.region
-        margin = self._mhf.region_margins([pub.track])
+        margin = self._mhf.region_margins([track])
         if self._mhf.kernels.inside_probability(x[None], P[None], region, margin)[0] < 0.5:
             return False
         for relation in spec.disappearance:
@@ -975,13 +976,14 @@ class WorldModel:
                     return False
         return True
 
-    def _hand_over(self, fresh: list[Track], dim: int) -> None:
+    def _hand_over(self, fresh_versions: list[Track | VersionRef], dim: int) -> None:
         """Lost ids go to fresh objects within the hand-over gate of the lost objects'
         predictions to now (lowest total Mahalanobis distance, Hungarian)."""
+        fresh = [track_of(version) for version in fresh_versions]
         lost = list(self._lost.items())
         now = self._state.time if self._state.time is not None else 0.0
         predicted = self._mhf.predict(
-            MHFState((), {i: pub.track for i, (_, pub) in enumerate(lost)}, None, 0, {}),
+            MHFState((), {i: track_of(pub.track) for i, (_, pub) in enumerate(lost)}, None, 0, {}),
             list(range(len(lost))),
             now,
         )
@@ -1014,7 +1016,7 @@ class WorldModel:
             return set(state.core.lineages())
         return {t.lineage for t in state.tracks.values()}
 
-    def _current(self) -> dict[int, Track]:
+    def _current(self) -> Mapping[int, Track | VersionRef]:
         """The published world at the latest time: lineage -> version. ``mht``: objects
         whose existence is at least ``min_existence``; ``paper``: the MAP hypothesis.
         The Rust engine computes it in the core (``core/src/world.rs``)."""

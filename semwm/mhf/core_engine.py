@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -188,6 +188,25 @@ def observed_to_core(rates: ObservedRates) -> _core.ObservedRates:
 
 def _listed(position: tuple[float, ...] | None) -> list[float] | None:
     return None if position is None else list(position)
+
+
+class VersionRef(NamedTuple):
+    """A version of a core state, named without making its Python value (the published
+    world of every scan names every object shown; their values are made only where
+    needed: :func:`track_of`)."""
+
+    lineage: int
+    cls: str
+    key: int
+    serial: int
+    state: CoreState
+
+
+def track_of(version: Track | VersionRef) -> Track:
+    """The version's Python value."""
+    if isinstance(version, VersionRef):
+        return version.state.engine.resolve(version)
+    return version
 
 
 class _Made:
@@ -487,12 +506,20 @@ class CoreEngine:
 
     def current(
         self, state: CoreState, shown: list[int], ids: Mapping[int, int]
-    ) -> dict[int, Track]:
+    ) -> dict[int, VersionRef]:
         """``WorldModel._current`` of ``state``: lineage -> the version shown
         (``core/src/world.rs``); ``shown`` the lineages published now, ``ids`` theirs."""
-        pairs = self.engine.current(state.core, shown, list(ids.items()))
-        tracks = self.tracks_of(state, [key for _, key in pairs])
-        return {lineage: track for (lineage, _), track in zip(pairs, tracks, strict=True)}
+        names = self.names
+        return {
+            lineage: VersionRef(lineage, names[cls], key, serial, state)
+            for lineage, key, cls, serial in self.engine.current(
+                state.core, shown, list(ids.items())
+            )
+        }
+
+    def resolve(self, ref: VersionRef) -> Track:
+        """The version ``ref`` names as a Python value."""
+        return self._made_tracks(ref.state.core, [ref.key], [ref.serial])[0]
 
     def _versions(self, core: _core.State, keys: list[int]) -> Iterator[Track]:
         names = self.names

@@ -339,22 +339,29 @@ impl PyEngine {
         })
     }
 
-    /// The published world of `state` (`WorldModel._current`): `(lineage, key)` of each
-    /// object shown, in the specification's order; `shown` the lineages published now,
-    /// `ids` their ids.
+    /// The published world of `state` (`WorldModel._current`): `(lineage, key, class
+    /// index, serial)` of each object shown, in the specification's order; `shown` the
+    /// lineages published now, `ids` their ids.
     fn current(
         &self,
         py: Python<'_>,
         state: &PyState,
         shown: Vec<u64>,
         ids: Vec<(u64, i64)>,
-    ) -> PyResult<Vec<(u64, u64)>> {
+    ) -> PyResult<Vec<(u64, u64, usize, u64)>> {
         let filter = self.filter.clone();
         let state = state.state.clone();
         run(py, "Engine.current", move || {
             let shown: KeySet<u64> = shown.into_iter().collect();
             let ids: KeyMap<u64, i64> = ids.into_iter().collect();
-            Ok(crate::world::current(&state, &filter.tables, &shown, &ids))
+            let pairs = crate::world::current(&state, &filter.tables, &shown, &ids);
+            Ok(pairs
+                .into_iter()
+                .map(|(lineage, key)| {
+                    let entry = &state.tracks[&key];
+                    (lineage, key, entry.version.cls, entry.serial)
+                })
+                .collect())
         })
     }
 
