@@ -6,6 +6,8 @@ counterpart in :mod:`semwm.filters.batched` and :mod:`semwm.filters.small`, and 
 definite) as the Python engine does.
 """
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -190,6 +192,9 @@ class Engine:
         state: State,
         measurements: list[tuple[object, ...]],
         view: tuple[object, ...] | None = None,
+    ) -> State: ...
+    def process_measurements(
+        self, state: State, measurements: list[Any], view: tuple[object, ...] | None = None
     ) -> State: ...
     def class_names(self) -> list[str]: ...
     def advance(

@@ -375,8 +375,8 @@ class CoreEngine:
         self, state: StateView, measurements: Sequence[Measurement], view: SensorView | None
     ) -> CoreState:
         core = self.to_core(state)
-        rows = [self._row(m) for m in measurements]
-        after = self.engine.process_scan(core, rows, None if view is None else self._view(view))
+        view_row = None if view is None else self._view(view)
+        after = self.engine.process_measurements(core, list(measurements), view_row)
         return CoreState(after, self)
 
     def _row(self, m: Measurement) -> tuple[Any, ...]:

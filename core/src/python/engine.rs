@@ -6,10 +6,10 @@
 //! Python reads a state's clusters and versions (to publish them, for the tests and the
 //! hypotheses view) through `State`'s methods, which copy only what is asked for.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
-use numpy::{IntoPyArray, PyArray1, PyArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -272,10 +272,27 @@ impl PyBook {
     }
 }
 
+/// A `Measurement` named tuple as it is read.
+type MeasurementTuple<'py> = (
+    u64,
+    f64,
+    String,
+    PyReadonlyArray1<'py, f64>,
+    PyReadonlyArray2<'py, f64>,
+    String,
+    Option<String>,
+    Option<String>,
+    f64,
+    Option<PyReadonlyArray1<'py, f64>>,
+    f64,
+);
+
 /// The filter of one knowledge base, its whole scan in the core.
 #[pyclass(frozen, name = "Engine", module = "semwm._core")]
 pub struct PyEngine {
     filter: Arc<Filter>,
+    classes: HashMap<String, usize>,
+    detectors: HashMap<String, usize>,
 }
 
 #[pymethods]
@@ -285,8 +302,24 @@ impl PyEngine {
     fn new(tables: &Bound<'_, PyDict>) -> PyResult<Self> {
         let tables = tables_from(tables)?;
         let filter = Filter::new(tables).map_err(to_py_err)?;
+        let classes = filter
+            .tables
+            .classes
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (c.name.clone(), i))
+            .collect();
+        let detectors = filter
+            .tables
+            .detectors
+            .iter()
+            .enumerate()
+            .map(|(i, d)| (d.name.clone(), i))
+            .collect();
         Ok(PyEngine {
             filter: Arc::new(filter),
+            classes,
+            detectors,
         })
     }
 
@@ -402,6 +435,68 @@ impl PyEngine {
         })?;
         Ok(PyBook {
             book: Arc::new(after),
+        })
+    }
+
+    /// `process_scan` of the Python engine's measurements as they are
+    /// (`semwm.mhf.measurement.Measurement` named tuples: seq, time, class, z, R,
+    /// detector, source, label, clutter rate, sensor, time std), read here without a
+    /// Python row per detection.
+    #[pyo3(signature = (state, measurements, view=None))]
+    fn process_measurements(
+        &self,
+        py: Python<'_>,
+        state: &PyState,
+        measurements: &Bound<'_, PyList>,
+        view: Option<ViewRow>,
+    ) -> PyResult<PyState> {
+        let tables = &self.filter.tables;
+        let d = tables.dim;
+        let mut scan = Vec::with_capacity(measurements.len());
+        for (j, item) in measurements.iter().enumerate() {
+            let m: MeasurementTuple<'_> = item.extract().map_err(|error| {
+                PyValueError::new_err(format!("measurements[{j}]: not a Measurement: {error}"))
+            })?;
+            let (seq, time, cls, z, r, detector, source, label, clutter_rate, sensor, time_std) = m;
+            let cls = *self.classes.get(cls.as_str()).ok_or_else(|| {
+                PyValueError::new_err(format!("measurements[{j}]: unknown class {cls:?}"))
+            })?;
+            let detector = *self.detectors.get(detector.as_str()).ok_or_else(|| {
+                PyValueError::new_err(format!("measurements[{j}]: unknown detector {detector:?}"))
+            })?;
+            let z = z
+                .as_slice()
+                .map(<[f64]>::to_vec)
+                .unwrap_or_else(|_| z.as_array().to_vec());
+            let r: Vec<f64> = r.as_array().iter().copied().collect();
+            if z.len() != d || r.len() != d * d {
+                return Err(PyValueError::new_err(format!(
+                    "measurements[{j}]: expected z of {d} and R of {} values",
+                    d * d
+                )));
+            }
+            scan.push(Measurement {
+                seq,
+                time,
+                cls,
+                z,
+                r,
+                detector,
+                source: Name::from(source.unwrap_or_default()),
+                label: label.map(Name::from),
+                clutter_rate,
+                sensor: sensor.map(|s| s.as_array().to_vec()),
+                time_std,
+            });
+        }
+        let view = view.map(sensor_view);
+        let filter = self.filter.clone();
+        let before = state.state.clone();
+        let after = run(py, "Engine.process_measurements", move || {
+            filter.process_scan(&before, &scan, view.as_ref())
+        })?;
+        Ok(PyState {
+            state: Arc::new(after),
         })
     }
 
