@@ -222,6 +222,22 @@ def outside_region(det: Detection, knowledge: Knowledge, R: np.ndarray) -> bool:
     return False
 
 
+def region_bounds(knowledge: Knowledge, R: np.ndarray) -> tuple[list[float], list[float]] | None:
+    """Per axis, the lowest and highest position :func:`outside_region` keeps for a
+    detection with noise ``R`` (the region widened by the noise at the gate's quantile);
+    ``None`` without a region."""
+    region = knowledge.world.region
+    if region is None:
+        return None
+    p = knowledge.world.gate_probability
+    gamma = _line_of_sight_gate(p) if p < 1.0 else 0.0
+    margins = [math.sqrt(gamma * max(float(R[axis, axis]), 0.0)) for axis in range(len(region))]
+    return (
+        [low - m for (low, _), m in zip(region, margins, strict=True)],
+        [high + m for (_, high), m in zip(region, margins, strict=True)],
+    )
+
+
 @functools.lru_cache(maxsize=16)
 def _line_of_sight_gate(p: float) -> float:
     """The one-dimensional chi-square quantile of ``p`` (once per gate probability)."""

@@ -67,6 +67,7 @@ from semwm.validation import (
     out_of_range,
     outside_region,
     parse,
+    region_bounds,
 )
 from semwm.world_types import (
     TENTATIVE_IDS,
@@ -489,8 +490,9 @@ class WorldModel:
         view = self._view(sensor, measurements) if sensor is not None else None
         used: list[Measurement] = []
         skipped: list[IgnoredDetection] = []
+        bounds: dict[tuple[str, str], tuple[list[float], list[float]] | None] = {}
         for index, (m, d) in enumerate(zip(measurements, parsed, strict=True)):
-            why = self._ignored(d, m, index)
+            why = self._ignored(d, m, index, bounds)
             if why is None:
                 used.append(m)
             else:
@@ -524,9 +526,17 @@ class WorldModel:
             ignored_detections=tuple(skipped),
         )
 
-    def _ignored(self, det: Detection, m: Measurement, index: int) -> IgnoredDetection | None:
-        """Why detection ``index`` of a batch is not used, or ``None`` when it is."""
-        if out_of_range(det, self._knowledge, m.R):
+    def _ignored(
+        self,
+        det: Detection,
+        m: Measurement,
+        index: int,
+        bounds: dict[tuple[str, str], tuple[list[float], list[float]] | None],
+    ) -> IgnoredDetection | None:
+        """Why detection ``index`` of a batch is not used, or ``None`` when it is.
+        ``bounds``: the region's bounds per (class, detector) of the batch so far, for
+        detections with the class's noise (:func:`semwm.validation.region_bounds`)."""
+        if det.sensor_position is not None and out_of_range(det, self._knowledge, m.R):
             detector = det.detector or self._knowledge.default_detector
             reach = self._knowledge.detectors[detector].range
             return IgnoredDetection(
@@ -536,7 +546,22 @@ class WorldModel:
                 "(check units and frame)",
                 m.source,
             )
-        if self._knowledge.world.region is not None and outside_region(det, self._knowledge, m.R):
+        if self._knowledge.world.region is None:
+            return None
+        if det.covariance is None:  # the class's noise: the bounds once per batch
+            key = (m.cls, m.detector)
+            if key not in bounds:
+                bounds[key] = region_bounds(self._knowledge, m.R)
+            limits = bounds[key]
+            assert limits is not None
+            low, high = limits
+            position = det.position
+            outside = any(
+                v < a or v > b for v, a, b in zip(position, low, high, strict=False)
+            )
+        else:
+            outside = outside_region(det, self._knowledge, m.R)
+        if outside:
             region = ", ".join(f"[{a:g}, {b:g}]" for a, b in self._knowledge.world.region)
             return IgnoredDetection(
                 index,
