@@ -44,7 +44,6 @@ from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted, predict_tracks
 from semwm.mhf.prune import log_add, merge, prune
 from semwm.mhf.rates import MIN_EVIDENCE_SCANS, ObservedRates, ScanCoverage
-from semwm.mhf.rust_expansion import ScanExpander
 from semwm.mhf.similar import merge_similar
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, StateView, Track
 
@@ -150,15 +149,6 @@ class MultipleHypothesisFilter:
         self.missed_detections = self.mht and world.missed_detection_term
         self.observed_rates = self.mht and world.observed_detection_rates
         self.merge_distance = world.merge_distance if self.mht else 0.0
-        # the Rust engine's expansion of a scan (step 5), else None: the Python methods
-        associator = self.associator
-        self._rust_expansion = (
-            ScanExpander(
-                self.ratio, self.max_hypotheses, associator.model, associator.log_label_error
-            )
-            if self.kernels.engine == "rust"
-            else None
-        )
         self.region = world.region
         # sqrt(chi2_1 quantile of gate_probability): a margin in standard deviations
         self._gate_quantile = float(
@@ -479,12 +469,10 @@ class MultipleHypothesisFilter:
     ) -> tuple[Cluster, ...]:
         """Step 5: the scan's clusters, detection by detection: the clusters a detection
         touches joined (:func:`_product`), expanded (:meth:`_expand`) and split
-        (:meth:`_split`). With the Rust engine, the rest of the scan from its first
-        detection that needs them is computed in one call (:mod:`semwm.mhf.rust_expansion`,
-        ``core/src/expansion.rs``); settled and certain updates before it are bookkeeping
-        (no hypothesis is built) and stay here."""
+        (:meth:`_split`); settled and certain updates are bookkeeping (no hypothesis is
+        built)."""
         book = _ClusterBook(clusters)
-        for position, option in enumerate(options):
+        for option in options:
             if isinstance(option, SettledUpdate):  # what _certain_update would give
                 table.add(option.updated, origin=option.old_key, fresh=True)
                 book.take(book.owners({option.old_key}))
@@ -506,9 +494,6 @@ class MultipleHypothesisFilter:
                 book.take(touched)
                 book.put((certain,))
                 continue
-            if self._rust_expansion is not None:  # this detection and the rest: in Rust
-                self._rust_expansion.expand(book, options, position, table)
-                break
             merged = _product(book.take(touched), self.ratio, self.max_hypotheses)
             expanded = self._expand(merged, option, table)
             book.put(self._split(expanded, table.tracks))

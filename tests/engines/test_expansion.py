@@ -23,13 +23,13 @@ from semwm import _core
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.mhf.association import DetectionOptions, SettledUpdate
-from semwm.mhf.filter import MultipleHypothesisFilter, _TrackTable
+from semwm.mhf.filter import MultipleHypothesisFilter, _ClusterBook, _TrackTable
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.prune import merge, prune
-from semwm.mhf.rust_expansion import ScanExpander
 from semwm.mhf.state import Cluster, MHFState, Track
 
 from . import needs_rust
+from .scan_expander import ScanExpander
 
 pytestmark = needs_rust
 
@@ -180,19 +180,37 @@ def _run(case: Case, engine: str) -> tuple[object, ...]:
     mhf.max_hypotheses = case.max_hypotheses
     mhf.associator = copy.copy(mhf.associator)
     mhf.associator.log_label_error = case.log_label_error
-    mhf._rust_expansion = (
-        ScanExpander(case.ratio, case.max_hypotheses, case.model, case.log_label_error)
-        if engine == "rust"
-        else None
-    )
     table = _TrackTable(case.state)
     table.next_key = case.next_key  # the keys the options took
     try:
-        clusters = mhf._expand_scan(case.state.clusters, case.options, table)
+        if engine == "rust":
+            expander = ScanExpander(
+                case.ratio, case.max_hypotheses, case.model, case.log_label_error
+            )
+            clusters = _rust_expand(mhf, expander, case, table)
+        else:
+            clusters = mhf._expand_scan(case.state.clusters, case.options, table)
     except ValueError as error:
         return ("ValueError", str(error))
     tracks = {k: (t.label, t.lineage, t.rate) for k, t in table.tracks.items()}
     return (clusters, tracks, table.existence, table.fresh, table.next_key)
+
+
+def _rust_expand(
+    mhf: MultipleHypothesisFilter, expander: ScanExpander, case: Case, table: _TrackTable
+) -> tuple[Cluster, ...]:
+    """The scan's options from the first on in the core, the first option's versions in
+    the table first (as ``_expand_scan``'s loop adds them before the algebra)."""
+    book = _ClusterBook(case.state.clusters)
+    if case.options:
+        first = case.options[0]
+        if isinstance(first, DetectionOptions):
+            if not mhf.mht:
+                table.add(first.new_track, fresh=True)
+            for old_key, (updated, _, _) in first.existing.items():
+                table.add(updated, origin=old_key, fresh=True)
+        expander.expand(book, case.options, 0, table)
+    return book.clusters()
 
 
 def _assert_same(case: Case) -> None:

@@ -1,24 +1,19 @@
-"""The Rust engine's expansion of one scan: step 5 of :mod:`semwm.mhf.filter`
-(``_product``, ``_expand``, ``_split``, ``_certain_update``, merging and pruning)
-computed by the compiled core (``core/src/expansion.rs``, ``core/src/hypotheses.rs``),
-at most once per scan: ``MultipleHypothesisFilter._expand_scan`` does the settled and
-certain updates (bookkeeping: no hypothesis is built) with either engine and hands the
-rest of the scan to :class:`ScanExpander` at its first detection that needs the algebra.
+"""The expansion algebra of one scan in the core (``core/src/mhf/expansion.rs``), driven
+on a scan's options: the parity harness of ``test_expansion.py``, which holds it to
+step 5 of :mod:`semwm.mhf.filter` (``_product``, ``_expand``, ``_split``,
+``_certain_update``, merging and pruning). The Rust engine's whole scan
+(``core/src/mhf/filter.rs``) calls the same algebra on its own state; this module hands
+it a scan's clusters and options as flat lists instead, so that random cases reach it
+directly.
 
-The Python methods are the specification (``tests/engines/`` holds both to the same
-hypotheses). What crosses the boundary is flat lists, not an object per hypothesis:
-
-- in: the clusters the rest of the scan can touch (those holding an object some
-  detection may update, whose presence makes a birth likelier, or that holds a
-  detection's label); every version they hold and every version the options name (key,
-  rate, label); the options, in the scan's order;
+- in: the clusters the scan can touch (those holding an object some detection may
+  update, whose presence makes a birth likelier, or that holds a detection's label);
+  every version they hold and every version the options name (key, rate, label); the
+  options, in the scan's order;
 - out: the given clusters no detection touched, the new clusters, and the versions the
   expansion made (births, copies that gave a label up) in the order their keys were
   given, which :class:`ScanExpander` then makes in the scan's track table as the Python
   methods would have.
-
-Importing it is safe without the extension; making a :class:`ScanExpander` then raises
-:class:`~semwm.filters.engine.EngineUnavailable`.
 """
 
 from __future__ import annotations
