@@ -1,22 +1,13 @@
-//! `semwm._core.ObservedRates`: the observed rates (`crate::mhf::rates`) kept in the core
-//! between scans, with the methods of the specification's `ObservedRates`
-//! (`semwm/mhf/rates.py`) that the scan calls; `semwm/mhf/rust_rates.py` wraps it.
-//!
-//! Immutable, as the specification's: `after_scan` returns new rates, sharing the old
-//! ones' unchanged parts. `state` and `of` convert to and from plain tuples (the
-//! specification's dataclasses are built from them in Python).
+//! `semwm._core.ObservedRates`: the observed rates (`crate::mhf::rates`) of a state kept
+//! in the core, as plain rows: `state` and `of` convert to and from them, and
+//! `semwm/mhf/core_engine.py` builds the specification's `ObservedRates` from them (a
+//! Python state handed to the core, `GET /sources`' rate report).
 
-use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::sync::Arc;
 
-use numpy::{IntoPyArray, PyArray1};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use crate::error::{KernelError, KernelResult};
-use crate::mhf::hypotheses::{KeyMap, KeySet};
-use crate::mhf::rates::{FalseAlarms, Name, ObservedRates, ScanReport, SourceClock, StreamCounts};
-use crate::python::run;
+use crate::mhf::rates::{FalseAlarms, Name, ObservedRates, SourceClock, StreamCounts};
 
 /// A source's clock: name, last scan time, mean interval, sensor position, speed.
 type ClockRow = (String, f64, Option<f64>, Option<Vec<f64>>, f64);
@@ -29,21 +20,6 @@ type AlarmRow = (String, String, f64, Vec<u64>, u64);
 
 fn named(text: String) -> Name {
     Arc::from(text)
-}
-
-fn by_detector(entries: BTreeMap<String, Vec<u64>>) -> BTreeMap<Name, Vec<u64>> {
-    entries.into_iter().map(|(k, v)| (named(k), v)).collect()
-}
-
-/// Per object, the same length as `lineages`.
-fn expect_rows(name: &str, got: usize, count: usize) -> KernelResult<()> {
-    if got == count {
-        Ok(())
-    } else {
-        Err(KernelError::Shape(format!(
-            "{name}: expected {count} values (one per lineage), got {got}"
-        )))
-    }
 }
 
 /// The observed rates of one state (`semwm.mhf.rates.ObservedRates` in the core).
@@ -159,126 +135,5 @@ impl PyObservedRates {
             })
             .collect();
         (sources, streams, seen, alarms)
-    }
-
-    fn miss_span(&self, source: &str, time: f64) -> f64 {
-        self.rates.miss_span(source, time)
-    }
-
-    fn source_rates<'py>(
-        &self,
-        py: Python<'py>,
-        source: String,
-        lineages: Vec<u64>,
-        class_rates: Vec<f64>,
-        classes: Vec<String>,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let rates = self.rates.clone();
-        let result = run(py, "ObservedRates.source_rates", move || {
-            expect_rows("class_rates", class_rates.len(), lineages.len())?;
-            expect_rows("classes", classes.len(), lineages.len())?;
-            let classes: Vec<&str> = classes.iter().map(String::as_str).collect();
-            Ok(rates.source_rates(&source, &lineages, &class_rates, &classes))
-        })?;
-        Ok(result.into_pyarray(py))
-    }
-
-    /// `ObservedRates.from_stream`.
-    #[pyo3(name = "from_stream", signature = (source, detector, lineages, class_rates, time, classes=None, unconfirmed=None))]
-    #[allow(clippy::too_many_arguments)]
-    fn stream_rates<'py>(
-        &self,
-        py: Python<'py>,
-        source: String,
-        detector: String,
-        lineages: Vec<u64>,
-        class_rates: Vec<f64>,
-        time: f64,
-        classes: Option<Vec<String>>,
-        unconfirmed: Option<Vec<bool>>,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let rates = self.rates.clone();
-        let result = run(py, "ObservedRates.from_stream", move || {
-            let count = lineages.len();
-            expect_rows("class_rates", class_rates.len(), count)?;
-            if let Some(classes) = &classes {
-                expect_rows("classes", classes.len(), count)?;
-            }
-            if let Some(unconfirmed) = &unconfirmed {
-                expect_rows("unconfirmed", unconfirmed.len(), count)?;
-            }
-            let names: Option<Vec<&str>> = classes
-                .as_ref()
-                .map(|c| c.iter().map(String::as_str).collect());
-            Ok(rates.stream_rates(
-                (&source, &detector),
-                &lineages,
-                &class_rates,
-                time,
-                names.as_deref(),
-                unconfirmed.as_deref(),
-            ))
-        })?;
-        Ok(result.into_pyarray(py))
-    }
-
-    fn detection_probabilities(
-        &self,
-        source: &str,
-        detector: &str,
-        priors: BTreeMap<String, f64>,
-    ) -> BTreeMap<String, f64> {
-        self.rates
-            .detection_probabilities(source, detector, &priors)
-    }
-
-    /// The rates after one scan (`ObservedRates.after_scan`'s arguments).
-    #[pyo3(signature = (
-        source, time, detected, born, alive, position=None, classes=None,
-        born_elsewhere=None, scanned=None, out_of_view=HashSet::new()
-    ))]
-    #[allow(clippy::too_many_arguments)]
-    fn after_scan(
-        &self,
-        py: Python<'_>,
-        source: String,
-        time: f64,
-        detected: BTreeMap<String, Vec<u64>>,
-        born: BTreeMap<String, Vec<u64>>,
-        alive: KeySet<u64>,
-        position: Option<Vec<f64>>,
-        classes: Option<HashMap<u64, String>>,
-        born_elsewhere: Option<BTreeMap<String, Vec<u64>>>,
-        scanned: Option<BTreeSet<String>>,
-        out_of_view: HashSet<u64>,
-    ) -> PyResult<Self> {
-        if !time.is_finite() {
-            return Err(PyValueError::new_err(format!(
-                "time: expected a finite time, got {time}"
-            )));
-        }
-        let report = ScanReport {
-            source: named(source),
-            time,
-            detected: by_detector(detected),
-            born: by_detector(born),
-            alive,
-            position,
-            classes: classes.map(|c| {
-                c.into_iter()
-                    .map(|(l, n)| (l, named(n)))
-                    .collect::<KeyMap<u64, Name>>()
-            }),
-            born_elsewhere: born_elsewhere.map(by_detector).unwrap_or_default(),
-            scanned: scanned.map(|s| s.into_iter().map(named).collect()),
-            out_of_view: out_of_view.into_iter().collect(),
-        };
-        let rates = self.rates.clone();
-        let after = run(py, "ObservedRates.after_scan", move || {
-            Ok(rates.after_scan(&report))
-        })?;
-        Ok(PyObservedRates {
-            rates: Arc::new(after),
-        })
     }
 }
