@@ -123,6 +123,8 @@ def create_app(settings: Settings, *, fast_ingest: bool = True) -> FastAPI:
     app.state.settings = settings
     app.state.feed = None
     app.state.metrics = Metrics()
+    if settings.stage_timing:
+        app.state.metrics.time_stages()
     app.state.metrics.watch(
         lambda: app.state.feed.service if app.state.feed else None,
         lambda: app.state.feed.subscriber_count if app.state.feed else 0,
@@ -174,7 +176,12 @@ def _add_guards(app: FastAPI, settings: Settings, fast_ingest: bool) -> None:
     """
     # Innermost: after every guard, accepted batches skip the framework (api.ingest_fast).
     if fast_ingest:
-        app.add_middleware(FastIngest, service=lambda: _service(app), max_batch=settings.max_batch)
+        app.add_middleware(
+            FastIngest,
+            service=lambda: _service(app),
+            max_batch=settings.max_batch,
+            stages=app.state.metrics.stages,  # stage_timing: each accepted request's stages
+        )
     app.add_middleware(BugBarrier)
     app.add_middleware(
         RequestGuard,

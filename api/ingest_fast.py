@@ -29,10 +29,12 @@ from typing import Any, TypeVar
 from starlette.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from api import stages as timing
 from api.errors import ApiError
 from api.routes.detections import apply_json
 from api.schemas import MAX_KEY, ingest_out
 from api.service import COMMIT_HEADER, Committed, WorldBusy, WorldService
+from api.stages import StageTotals, stage
 from semwm import IngestResult
 
 PATH = "/detections"
@@ -62,27 +64,50 @@ class FastIngest:
     """Answer accepted ``POST /detections`` batches directly (see the module docstring).
 
     ``service``: the world service the routes use (a test's override included);
-    ``max_batch``: the settings' largest batch.
+    ``max_batch``: the settings' largest batch; ``stages``: where each accepted
+    request's seconds by stage are added (:mod:`api.stages`; ``None``: not timed).
     """
 
-    def __init__(self, app: ASGIApp, service: Callable[[], WorldService], max_batch: int) -> None:
+    def __init__(
+        self,
+        app: ASGIApp,
+        service: Callable[[], WorldService],
+        max_batch: int,
+        stages: StageTotals | None = None,
+    ) -> None:
         self.app = app
         self.service = service
         self.max_batch = max_batch
+        self.stages = stages
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http" or scope["method"] != "POST" or scope["path"] != PATH:
             await self.app(scope, receive, send)
             return
+        if self.stages is None:
+            await self._answer(scope, receive, send)
+            return
+        stages, token = timing.start()
+        try:
+            answered = await self._answer(scope, receive, send)
+        finally:
+            timing.stop(token)
+        if answered:
+            self.stages.add(stages.finish())
+
+    async def _answer(self, scope: Scope, receive: Receive, send: Send) -> bool:
+        """Answer the request; whether it was answered here with a 200 (its stages are
+        then counted), not refused or passed to the route."""
         key = _idempotency_key(scope)
         if key is _MALFORMED:  # the route says why
             await self.app(scope, receive, send)
-            return
+            return False
         try:
-            raw = await _body(receive)
+            with stage("read"):
+                raw = await _body(receive)
         except Exception as error:  # the guard's 413, a disconnect: as the route meets it
             await self.app(scope, _raising(error), send)
-            return
+            return False
         try:
             committed = await self._apply(self.service(), raw, key)
         except ApiError as refusal:  # nothing was applied: the route's error answer
@@ -90,24 +115,22 @@ class FastIngest:
                 status_code=refusal.status, content=refusal.body(), headers=refusal.headers
             )
             await answer(scope, receive, send)
-            return
-        result = committed.value
-        body = (
-            ingest_out(result)
-            .model_dump_json()
-            .encode()
-        )
-        headers = [
-            (b"content-length", str(len(body)).encode()),
-            (b"content-type", b"application/json"),
-            (COMMIT_HEADER.lower().encode(), str(committed.commit).encode()),
-        ]
-        if committed.replayed:
-            headers.append((b"idempotent-replayed", b"true"))
-        if committed.dropped:
-            headers.append((b"x-semwm-dropped", b"late"))
-        await send({"type": "http.response.start", "status": 200, "headers": headers})
-        await send({"type": "http.response.body", "body": body})
+            return False
+        with stage("respond"):
+            result = committed.value
+            body = ingest_out(result).model_dump_json().encode()
+            headers = [
+                (b"content-length", str(len(body)).encode()),
+                (b"content-type", b"application/json"),
+                (COMMIT_HEADER.lower().encode(), str(committed.commit).encode()),
+            ]
+            if committed.replayed:
+                headers.append((b"idempotent-replayed", b"true"))
+            if committed.dropped:
+                headers.append((b"x-semwm-dropped", b"late"))
+            await send({"type": "http.response.start", "status": 200, "headers": headers})
+            await send({"type": "http.response.body", "body": body})
+        return True
 
     async def _apply(
         self, service: WorldService, raw: bytes, key: str | None
@@ -119,7 +142,8 @@ class FastIngest:
                 return apply_json(service, raw, self.max_batch, key, wait=False)
             except WorldBusy:
                 pass  # someone holds the world (or the body needs its full check): wait there
-        return await _in_worker(apply_json, service, raw, self.max_batch, key)
+        with stage("handoff"):  # the stages inside count for themselves
+            return await _in_worker(apply_json, service, raw, self.max_batch, key)
 
 
 async def _in_worker(function: Callable[..., _T], *args: Any) -> _T:

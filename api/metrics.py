@@ -8,9 +8,11 @@ lock acquisition and ingesting costs two counter increments.
 Metric names (all prefixed ``semwm_``): ``detections_accepted_total``,
 ``detections_ignored_total{source,reason}``, ``detections_refused_total{reason}``,
 ``ingest_latency_seconds`` (the whole ``POST /detections`` request),
-``ingest_apply_seconds`` (the world model's part, under the lock), ``objects``,
-``stored_hypotheses``, ``joint_hypotheses_log10``, ``clusters``, ``tracks``,
-``held_scans``, ``replayed_scans``, ``knowledge_version``, ``world_time_seconds``,
+``ingest_apply_seconds`` (the world model's part, under the lock),
+``ingest_stage_seconds{stage}`` (an accepted request's time by stage, a summary;
+with ``stage_timing`` only: :mod:`api.stages`), ``objects``, ``stored_hypotheses``,
+``joint_hypotheses_log10``, ``clusters``, ``tracks``, ``held_scans``,
+``replayed_scans``, ``knowledge_version``, ``world_time_seconds``,
 ``stream_subscribers``.
 """
 
@@ -27,6 +29,7 @@ from prometheus_client.registry import Collector
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from api.service import WorldChange, WorldService
+from api.stages import StageCollector, StageTotals, time_collections
 
 LATENCY_BUCKETS = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)
 
@@ -160,6 +163,17 @@ class Metrics:
             buckets=LATENCY_BUCKETS,
             registry=self.registry,
         )
+        self.stages: StageTotals | None = None
+        """Accepted requests' seconds by stage, once :meth:`time_stages` is called."""
+
+    def time_stages(self) -> StageTotals:
+        """Time accepted requests by stage (:mod:`api.stages`) and export the sums
+        (``semwm_ingest_stage_seconds``); :class:`api.ingest_fast.FastIngest` adds them."""
+        if self.stages is None:
+            self.stages = StageTotals()
+            self.registry.register(StageCollector(self.stages))
+            time_collections()
+        return self.stages
 
     def watch(
         self, service: Callable[[], WorldService | None], subscribers: Callable[[], int]

@@ -34,6 +34,7 @@ from api.errors import (
     validation_items,
 )
 from api.ordered_lock import TimeOrderedLock
+from api.stages import stage
 from semwm import IngestResult, WorldModel, load_knowledge
 from semwm.clock import Exchange
 from semwm.detection import (
@@ -379,10 +380,11 @@ class WorldService:
         """Hold the world's lock, noting since when (for ``/ready``). Waiters enter by
         smallest ``order`` (a scan's time; others ``-inf``): :class:`TimeOrderedLock`.
         ``wait`` false: raise :class:`WorldBusy` at once if the lock is taken."""
-        if wait:
-            self._lock.acquire(order)
-        elif not self._lock.try_acquire():
-            raise WorldBusy
+        with stage("lock"):
+            if wait:
+                self._lock.acquire(order)
+            elif not self._lock.try_acquire():
+                raise WorldBusy
         try:
             self._busy_since = time.monotonic()
             try:
@@ -420,8 +422,9 @@ class WorldService:
         failed request changes nothing; a bug is remembered for ``/ready``. A change
         that completes gets the next commit number.
         """
-        saved = _save(self._model)
-        sources = set(self._sources)
+        with stage("save"):
+            saved = _save(self._model)
+            sources = set(self._sources)
         try:
             yield
         except BaseException as error:
@@ -432,7 +435,8 @@ class WorldService:
             raise
         self._commit += 1
         self._failure = None
-        self._summary = self._summarise()
+        with stage("notify"):
+            self._summary = self._summarise()
 
     def _scan_order(
         self, detections: Sequence[Detection | dict[str, Any]], sensor: dict[str, Any] | None
@@ -478,9 +482,12 @@ class WorldService:
         the first time, and nothing is applied again. ``wait`` false: raise
         :class:`WorldBusy` (nothing applied) rather than wait for the world's lock.
         """
-        self._shed_if_behind()
-        with self._locked(self._scan_order(detections, sensor), wait):
-            return self._ingest_locked(detections, batch, key, sensor)
+        with stage("service"):  # api.stages: the request's time in the service by stage
+            self._shed_if_behind()
+            with stage("sources"):
+                order = self._scan_order(detections, sensor)
+            with self._locked(order, wait):
+                return self._ingest_locked(detections, batch, key, sensor)
 
     def _shed_if_behind(self) -> None:
         """503 with Retry-After when ``max_waiting`` writes already wait for the world:
@@ -510,7 +517,7 @@ class WorldService:
             return Committed(earlier.value, earlier.commit, replayed=True)
         now = self.clock()
         try:
-            with self._sources_lock:
+            with stage("sources"), self._sources_lock:
                 in_order = self._model.hold == 0
                 placement = self.sources.place(
                     list(detections),
@@ -529,25 +536,30 @@ class WorldService:
                     sensor = {**sensor, "time": placed_time}
         except TimeGuardError as error:
             raise InvalidError(_time_items(error, batch)) from error
-        if self._late_to_drop(placement):
+        with stage("sources"):
+            late_to_drop = self._late_to_drop(placement)
+        if late_to_drop:
             with self._sources_lock:
                 self.sources.dropped(placement)
             self.dropped_late += 1
             dropped = IngestResult(applied=0, time=self._model.latest_time)
             return Committed(dropped, self._commit, dropped=True)
-        self._refuse_late_if_behind(placement)
-        placed = [
-            d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
-        ]
+        with stage("sources"):
+            self._refuse_late_if_behind(placement)
+            placed = [
+                d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
+            ]
         if sensor is not None:
             _check_sensor(sensor)  # before the journal writes it (issue 30)
         started = time.perf_counter()
         with self._change():
-            self._check_sources(placed, batch)
+            with stage("sources"):
+                self._check_sources(placed, batch)
             try:
                 with self._hooked(batch_record(placed, sensor)):
                     replayed, began = self._model.replayed_scans, time.perf_counter()
-                    result = self._model.ingest(placed, sensor=sensor)
+                    with stage("model"):
+                        result = self._model.ingest(placed, sensor=sensor)
                     replayed = self._model.replayed_scans - replayed
                     if replayed > 0:  # its share of the time: the scans it processed again
                         took = time.perf_counter() - began
@@ -568,22 +580,23 @@ class WorldService:
                     else ""
                 )
                 raise ConflictError(message + hint) from error
-        with self._sources_lock:
+        with stage("sources"), self._sources_lock:
             self.sources.accepted(placement, now)
         self._warn_ignored(result.ignored_detections)
         self.arrival_order_scans += len(placement.moved)
         if self._listeners:
-            self._notify(
-                WorldChange(
-                    "detections",
-                    tuple(placed),
-                    applied=result.applied,
-                    ignored=result.ignored,
-                    ignored_detections=result.ignored_detections,
-                    time=result.time,
-                    seconds=time.perf_counter() - started,
+            with stage("notify"):
+                self._notify(
+                    WorldChange(
+                        "detections",
+                        tuple(placed),
+                        applied=result.applied,
+                        ignored=result.ignored,
+                        ignored_detections=result.ignored_detections,
+                        time=result.time,
+                        seconds=time.perf_counter() - started,
+                    )
                 )
-            )
         committed = Committed(result, self._commit)
         if key is not None and self.idempotency_keys > 0:
             self._recent[key] = committed

@@ -32,6 +32,7 @@ from api.schemas import (
     ingest_out,
 )
 from api.service import COMMIT_HEADER, Committed, WorldBusy, WorldService
+from api.stages import stage
 from semwm import IngestResult
 
 router = APIRouter(tags=["detections"])
@@ -263,11 +264,14 @@ def apply_json(
     taken, and a body that is not plainly valid raises it too (its problems are
     collected where waiting is allowed).
     """
-    accepted = parse_json(raw, max_batch)
+    with stage("parse"):
+        accepted = parse_json(raw, max_batch)
     if accepted is None:
         if not wait:
             raise WorldBusy
-        return apply_body(world, decode_body(raw), max_batch, idempotency_key)
+        with stage("parse"):
+            payload = decode_body(raw)
+        return apply_body(world, payload, max_batch, idempotency_key)
     return _ingest(world, accepted, idempotency_key, wait)
 
 
@@ -280,8 +284,9 @@ def apply_body(
     :class:`ConflictError`; either way nothing is applied. A key (the header's, else
     the body's ``batch_id``) seen recently is answered as before and not applied again.
     """
-    parsed = parse_body(payload, max_batch)
-    items = [d.to_domain() for d in parsed.valid]
+    with stage("parse"):
+        parsed = parse_body(payload, max_batch)
+        items = [d.to_domain() for d in parsed.valid]
     if parsed.errors:
         # Report the domain problems of the others too, so one answer lists them all.
         more = world.domain_problems(items, parsed.index, parsed.batch)
