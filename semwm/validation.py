@@ -188,14 +188,21 @@ def out_of_range(det: Detection, knowledge: Knowledge, R: np.ndarray | None = No
     detector = knowledge.detectors[det.detector or knowledge.default_detector]
     if detector.range is None or det.sensor_position is None:
         return False
-    offset = np.asarray(det.position, dtype=float) - np.asarray(det.sensor_position, dtype=float)
-    distance = math.sqrt(float(offset @ offset))  # what np.linalg.norm computes
+    offset = [float(a) - float(b) for a, b in zip(det.position, det.sensor_position, strict=True)]
+    squared = 0.0
+    for value in offset:
+        squared += value * value
+    distance = math.sqrt(squared)  # what np.linalg.norm computes
     margin = 0.0
     p = knowledge.world.gate_probability
     if R is not None and distance > 0.0 and p < 1.0:
         d = min(len(offset), R.shape[0])
-        u = offset[:d] / distance
-        margin = math.sqrt(_line_of_sight_gate(p) * max(float(u @ R[:d, :d] @ u), 0.0))
+        u = [value / distance for value in offset[:d]]
+        rows = R[:d, :d].tolist()
+        # (u R) u, in numpy's order
+        w = [sum(u[i] * rows[i][j] for i in range(d)) for j in range(d)]
+        spread = sum(w[j] * u[j] for j in range(d))
+        margin = math.sqrt(_line_of_sight_gate(p) * max(spread, 0.0))
     return distance > detector.range + margin
 
 

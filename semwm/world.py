@@ -301,6 +301,8 @@ class WorldModel:
 
     # ------------------------------------------------------------------ state
     def _set_knowledge(self, knowledge: Knowledge) -> None:
+        # the region's bounds per (class, detector), for the batches' region check
+        self._region_bounds: dict[tuple[str, str], tuple[list[float], list[float]] | None] = {}
         self._knowledge = knowledge
         self._mhf = MultipleHypothesisFilter(knowledge, self.engine)
         self._summaries = {}  # the region may have changed
@@ -490,7 +492,7 @@ class WorldModel:
         view = self._view(sensor, measurements) if sensor is not None else None
         used: list[Measurement] = []
         skipped: list[IgnoredDetection] = []
-        bounds: dict[tuple[str, str], tuple[list[float], list[float]] | None] = {}
+        bounds = self._region_bounds
         for index, (m, d) in enumerate(zip(measurements, parsed, strict=True)):
             why = self._ignored(d, m, index, bounds)
             if why is None:
@@ -534,8 +536,8 @@ class WorldModel:
         bounds: dict[tuple[str, str], tuple[list[float], list[float]] | None],
     ) -> IgnoredDetection | None:
         """Why detection ``index`` of a batch is not used, or ``None`` when it is.
-        ``bounds``: the region's bounds per (class, detector) of the batch so far, for
-        detections with the class's noise (:func:`semwm.validation.region_bounds`)."""
+        ``bounds``: the region's bounds per (class, detector) for detections with the
+        class's noise (:func:`semwm.validation.region_bounds`), made once per knowledge."""
         if det.sensor_position is not None and out_of_range(det, self._knowledge, m.R):
             detector = det.detector or self._knowledge.default_detector
             reach = self._knowledge.detectors[detector].range

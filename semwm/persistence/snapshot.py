@@ -23,7 +23,7 @@ from semwm.persistence.replay import knowledge_from_payload
 from semwm.world import WorldModel
 
 SNAPSHOT_FORMAT = 1
-_DERIVED = ("_knowledge", "_mhf")  # rebuilt from the knowledge document
+_DERIVED = ("_knowledge", "_mhf", "_region_bounds")  # rebuilt from the knowledge document
 
 
 def _code_tag() -> str:
