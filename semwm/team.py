@@ -634,10 +634,11 @@ class Continuity:
         detections: Sequence[Detection],
         local_ids: Sequence[int],
     ) -> IngestResult:
-        """The global ``model`` takes one report of ``robot`` (``detections``, one scan,
-        with their ``local_ids``): widened (:meth:`widen`) against the model at the
-        report's time, then noted (:meth:`note`). Raises what
-        :meth:`WorldModel.ingest` raises (nothing is noted then)."""
+        """The global ``model`` takes one report of ``robot`` (``detections`` with their
+        ``local_ids``) scan by scan, in time order (a ``scans`` report holds several):
+        each scan widened (:meth:`widen`) against the model at its time, then noted
+        (:meth:`note`). Raises what :meth:`WorldModel.ingest` raises (nothing of that
+        scan is noted then; the report's earlier scans stay applied)."""
         if len(local_ids) != len(detections):
             raise ValueError(
                 f"need one local id per detection; got {len(local_ids)} for {len(detections)}"
