@@ -32,6 +32,17 @@ estimate holds the information sent before. What a report carries
   filter's gain on a re-sent estimate is about 0.4, so it lagged the robot's own
   estimate). An object updated without a detection found for it goes as ``updated``
   sends it;
+* ``scans``: the same detections as ``detections``, uncombined: each at its own time
+  with its own noise, so a report is the robot's scans since its last report reduced
+  to the detections its local model gave its objects, and the global model processes
+  them scan by scan, as flat does. A combined report is one scan of the robot, and one
+  scan holds at most one detection of an object: where the robot's local model
+  follows one real robot with two tracks that take its detections in turn (robots
+  crowding), the combination sends two detections of it in one scan and the global
+  model starts a false object (issue 28, bench_team seeds 12 and 14); scan by scan
+  each holds one. It also sends the detections that made the robot publish an object
+  (noted while the object was tentative, :data:`TENTATIVE_FLOOR`) with its first
+  report, as flat has them;
 * ``information``: only the information the object gained since it was last sent
   (equivalent measurement, information form): ``I = P⁻¹ - P_s⁻¹`` and
   ``z = I⁻¹ (P⁻¹ x - P_s⁻¹ x_s)``, with ``x_s`` the sent position moved on by the
@@ -55,7 +66,7 @@ so its view is no worse than the replica's and the rule errs towards sending.
 local id of each reported object travels with the report (:attr:`Report.local_ids`):
 the global side keeps a robot's report on the global object its local object went
 to before (:class:`Continuity`, on by default in :class:`TeamModel` and
-:func:`semwm.sim.team_run.run_team`, which also default to ``detections``: together
+:func:`semwm.sim.team_run.run_team`, which also default to ``scans``: together
 the two-level configuration closest to flat, issue 28). :class:`LocalModel` keeps
 ``updated`` as its default (the service's local models).
 
@@ -79,10 +90,16 @@ from semwm.knowledge.model import DetectorSpec, Knowledge
 from semwm.knowledge.resolve import resolve
 from semwm.validation import DetectionInput, as_batch, parse
 from semwm.world import IngestResult, WorldModel
-from semwm.world_types import WorldObject, WorldState
+from semwm.world_types import TENTATIVE_IDS, WorldObject, WorldState
 
 LOCAL_DETECTOR = "local_model"
 """The global model's detector for local-model reports (few false objects left)."""
+
+
+TENTATIVE_FLOOR = 1e-6
+"""``scans``: the local model notes the detections of objects at least this likely to
+exist, tentative ones included, so that an object's first report holds the detections
+that made the robot publish it (as flat has them)."""
 
 
 TRACKED_FACTOR = 2.0
@@ -96,8 +113,14 @@ class Strategy(StrEnum):
     ALL = "all"
     UPDATED = "updated"
     DETECTIONS = "detections"
+    SCANS = "scans"
     CI = "ci"
     INFORMATION = "information"
+
+
+_TRACKED_FACTOR_STRATEGIES = (Strategy.UPDATED, Strategy.DETECTIONS, Strategy.SCANS)
+"""Strategies that send an object the robot tracks, when they send its filtered estimate,
+with :data:`TRACKED_FACTOR` times its covariance."""
 
 
 def global_knowledge(knowledge: Knowledge, clutter_frequency: float = 0.05) -> Knowledge:
@@ -204,7 +227,7 @@ class LocalModel:
         noted per object they updated, for the next report (:meth:`_take`)."""
         batch = as_batch(detections)
         result = self.model.ingest(batch)
-        if self.strategy is Strategy.DETECTIONS and batch:
+        if self.strategy in (Strategy.DETECTIONS, Strategy.SCANS) and batch:
             self._take(parse(batch))
         return result
 
@@ -215,8 +238,11 @@ class LocalModel:
         object, so each object updated at the scan's time takes the scan's detection
         nearest its updated estimate (Mahalanobis distance with ``P + R``; a labelled
         detection the object holding its label), each detection at most once, nearest
-        pairs first. Detections of earlier times in the same batch are not noted (the
-        object's estimate then is gone): such objects go as ``updated`` sends them."""
+        pairs first, published objects before tentative ones (``scans`` notes tentative
+        objects too: the alternatives the MHF keeps, such as "this detection is a new
+        object", are tentative objects updated at the scan as well). Detections of
+        earlier times in the same batch are not noted (the object's estimate then is
+        gone): such objects go as ``updated`` sends them."""
         at = max(d.time for d in detections)
         scan = [d for d in detections if d.time == at]
         default = self.model.knowledge.default_detector
@@ -227,8 +253,13 @@ class LocalModel:
             for d in scan
         ]
         taxonomy = self.model.taxonomy
-        pairs: list[tuple[bool, float, int, int]] = []
-        for obj in self.model.world().objects:
+        pairs: list[tuple[bool, bool, float, int, int]] = []
+        candidates = (
+            self.model.world(min_existence=TENTATIVE_FLOOR).objects
+            if self.strategy is Strategy.SCANS
+            else self.model.world().objects
+        )
+        for obj in candidates:
             if obj.last_seen != at:
                 continue
             x, P = np.asarray(obj.position), np.asarray(obj.covariance)
@@ -237,11 +268,12 @@ class LocalModel:
                     continue
                 delta = np.asarray(det.position) - x
                 d2 = float(delta @ np.linalg.solve(P + R, delta))
-                pairs.append((det.label is None or det.label != obj.label, d2, obj.id, k))
+                mismatch = det.label is None or det.label != obj.label
+                pairs.append((obj.tentative, mismatch, d2, obj.id, k))
         pairs.sort()
         objects: set[int] = set()
         used: set[int] = set()
-        for _, _, object_id, k in pairs:
+        for _, _, _, object_id, k in pairs:
             if object_id in objects or k in used:
                 continue
             objects.add(object_id)
@@ -310,6 +342,8 @@ class LocalModel:
         if state.time is None:
             return None
         at = state.time
+        if self.strategy is Strategy.SCANS:
+            self._published()
         detections: list[dict[str, object]] = []
         ids: list[int] = []
         alive = set()
@@ -318,24 +352,44 @@ class LocalModel:
             sent = self._sent.get(obj.id)
             if new_only and sent is not None:
                 continue
-            item = self._item(obj, sent, at)
-            if item is None:
+            items = self._items(obj, sent, at)
+            if not items:
                 continue
-            detections.append(item)
-            ids.append(obj.id)
+            replica = sent.replica if sent is not None else None
+            for item in items:
+                detections.append(item)
+                ids.append(obj.id)
+                replica = self._replica(obj.cls, replica, item, float(item["time"]))  # type: ignore[arg-type]
             self._sent[obj.id] = _Sent(
                 at,
                 np.asarray(obj.position),
                 np.asarray(obj.velocity) if obj.velocity is not None else None,
                 np.asarray(obj.covariance),
                 obj.last_seen,
-                self._replica(obj.cls, sent.replica if sent is not None else None, item, at),
+                replica,
             )
         self._sent = {k: v for k, v in self._sent.items() if k in alive}
         self._taken = {k: v for k, v in self._taken.items() if k in alive}
         if not detections:
             return None
-        return Report(self.robot, at, tuple(detections), tuple(ids))
+        # in time order (``scans``: the robot's scans since the last report, one by one)
+        order = sorted(range(len(detections)), key=lambda i: float(detections[i]["time"]))  # type: ignore[arg-type]
+        return Report(
+            self.robot,
+            at,
+            tuple(detections[i] for i in order),
+            tuple(ids[i] for i in order),
+        )
+
+    def _published(self) -> None:
+        """The detections noted of objects while they were tentative go to the objects they
+        were published as (they are sent with the object's first report); those of objects
+        still tentative are dropped: a later report holds scans after this one only."""
+        for key in [k for k in self._taken if k > TENTATIVE_IDS]:
+            taken = self._taken.pop(key)
+            obj = self.model.object(key)
+            if obj is not None and not obj.tentative:
+                self._taken[obj.id] = [*taken, *self._taken.get(obj.id, ())]
 
     def _replica(
         self, cls: str, replica: _Replica | None, item: dict[str, object], at: float
@@ -365,6 +419,36 @@ class LocalModel:
         mean, _ = f.combine(x, P, mu)
         return np.asarray(mean[0, : f.dim])
 
+    def _items(self, obj: WorldObject, sent: _Sent | None, at: float) -> list[dict[str, object]]:
+        """What a report carries of ``obj``: with ``scans``, each detection the local model
+        gave it since the last report, at its own time with its own noise; else one item
+        (:meth:`_item`), or none."""
+        if self.strategy is Strategy.SCANS:
+            if sent is not None and obj.last_seen <= sent.last_seen:
+                return []
+            taken = self._taken.pop(obj.id, None)
+            if taken:
+                return [self._detection(obj, t.time, t.z, t.R) for t in taken]
+        item = self._item(obj, sent, at)
+        return [item] if item is not None else []
+
+    def _detection(
+        self, obj: WorldObject, time: float, position: np.ndarray, covariance: np.ndarray
+    ) -> dict[str, object]:
+        """A report item for ``obj``: a detection at ``time`` for the global model."""
+        item: dict[str, object] = {
+            "time": time,
+            "class": obj.cls,
+            "position": [float(v) for v in position],
+            "covariance": [[float(v) for v in row] for row in covariance],
+            "source": self.robot,
+        }
+        if self.detector is not None:
+            item["detector"] = self.detector
+        if obj.label is not None:
+            item["label"] = obj.label
+        return item
+
     def _item(self, obj: WorldObject, sent: _Sent | None, at: float) -> dict[str, object] | None:
         strategy = self.strategy
         if strategy is not Strategy.ALL and sent is not None and obj.last_seen <= sent.last_seen:
@@ -376,25 +460,14 @@ class LocalModel:
             position, covariance = combine_detections(taken, obj.velocity, at)
         elif strategy is Strategy.CI:
             covariance = 2.0 * covariance
-        elif strategy in (Strategy.UPDATED, Strategy.DETECTIONS) and obj.label is None:
+        elif obj.label is None and strategy in _TRACKED_FACTOR_STRATEGIES:
             covariance = TRACKED_FACTOR * covariance
         elif strategy is Strategy.INFORMATION and sent is not None:
             gained = _new_information(position, covariance, sent, at)
             if gained is None:
                 return None
             position, covariance = gained
-        item: dict[str, object] = {
-            "time": at,
-            "class": obj.cls,
-            "position": [float(v) for v in position],
-            "covariance": [[float(v) for v in row] for row in covariance],
-            "source": self.robot,
-        }
-        if self.detector is not None:
-            item["detector"] = self.detector
-        if obj.label is not None:
-            item["label"] = obj.label
-        return item
+        return self._detection(obj, at, position, covariance)
 
 
 def _distance2(z: np.ndarray, R: np.ndarray, obj: WorldObject) -> float:
@@ -561,16 +634,30 @@ class Continuity:
         detections: Sequence[Detection],
         local_ids: Sequence[int],
     ) -> IngestResult:
-        """The global ``model`` takes one report of ``robot`` (``detections``, one scan,
-        with their ``local_ids``): widened (:meth:`widen`) against the model at the
-        report's time, then noted (:meth:`note`). Raises what
-        :meth:`WorldModel.ingest` raises (nothing is noted then)."""
+        """The global ``model`` takes one report of ``robot`` (``detections`` with their
+        ``local_ids``) scan by scan, in time order (a ``scans`` report holds several):
+        each scan widened (:meth:`widen`) against the model at its time, then noted
+        (:meth:`note`). Raises what :meth:`WorldModel.ingest` raises (nothing of that
+        scan is noted then; the report's earlier scans stay applied)."""
         if len(local_ids) != len(detections):
             raise ValueError(
                 f"need one local id per detection; got {len(local_ids)} for {len(detections)}"
             )
         if not detections:
             return model.ingest([])
+        times = sorted({d.time for d in detections})
+        if len(times) > 1:  # a report of several scans (``scans``): one at a time
+            applied = ignored = 0
+            result = None
+            for t in times:
+                part = [i for i, d in enumerate(detections) if d.time == t]
+                result = self.ingest(
+                    model, robot, [detections[i] for i in part], [local_ids[i] for i in part]
+                )
+                applied += result.applied
+                ignored += result.ignored
+            assert result is not None
+            return replace(result, applied=applied, ignored=ignored)
         at = detections[0].time
         before = WorldState(time=at, objects=())
         if model.latest_time is not None:
@@ -702,7 +789,7 @@ class TeamModel:
     knowledge
         Knowledge of the local models; the global one gets :func:`global_knowledge`.
     strategy
-        What local reports carry (default ``detections``).
+        What local reports carry (default ``scans``).
     continuity
         A probability: the global model keeps a robot's report on the global object
         its local object went to before (:class:`Continuity`; default
@@ -712,7 +799,7 @@ class TeamModel:
     def __init__(
         self,
         knowledge: Knowledge,
-        strategy: Strategy | str = Strategy.DETECTIONS,
+        strategy: Strategy | str = Strategy.SCANS,
         *,
         reorder_window: float = 0.0,
         continuity: float | None = CONTINUITY_PROBABILITY,

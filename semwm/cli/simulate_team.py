@@ -64,8 +64,8 @@ def add_team_options(parser: argparse.ArgumentParser) -> None:
     )
     team.add_argument(
         "--strategy",
-        default="detections",
-        choices=("all", "updated", "detections", "ci", "information"),
+        default="scans",
+        choices=("all", "updated", "detections", "scans", "ci", "information"),
         help="what local models send (with --levels 2)",
     )
     team.add_argument(

@@ -159,7 +159,7 @@ def run_team(
     *,
     levels: int = 1,
     network: Network | None = None,
-    strategy: Strategy | str = Strategy.DETECTIONS,
+    strategy: Strategy | str = Strategy.SCANS,
     report_period: float = 0.1,
     drift_gate: float | None = 0.95,
     seed: int = 0,
@@ -178,7 +178,7 @@ def run_team(
     robot's report on the global object its local object went to before
     (:class:`semwm.team.Continuity` with this probability; by default
     :data:`~semwm.team.CONTINUITY_PROBABILITY`); ``None``: every report is associated
-    afresh. The defaults, ``detections`` with continuity, are the two-level
+    afresh. The defaults, ``scans`` with continuity, are the two-level
     configuration closest to flat (docs/team.md)."""
     if levels not in (1, 2):
         raise ValueError(f"levels must be 1 or 2; got {levels}")
@@ -317,7 +317,9 @@ def run_team(
             if reorder:
                 late += process(placed, m.local_ids)
             else:
-                heapq.heappush(buffer, (placed[0].time, m.source, m.seq, placed, m.local_ids))
+                # the buffer sorts scans: a report of several (``scans``) is split
+                for at, scan, ids in _by_time(placed, m.local_ids):
+                    heapq.heappush(buffer, (at, m.source, m.seq, scan, ids))
         while buffer and buffer[0][0] <= now - hold + 1e-9:
             _, _, _, held, ids = heapq.heappop(buffer)
             late += process(held, ids)
@@ -365,6 +367,22 @@ def run_team(
             "continuity_widened": keep.widened if keep is not None else None,
         },
     )
+
+
+def _by_time(
+    detections: list[Detection], local_ids: tuple[int, ...] | None
+) -> list[tuple[float, list[Detection], tuple[int, ...] | None]]:
+    """``detections`` (one message) as its scans in time order, each with its local ids
+    (``None`` when the message has none or placement left some detections out)."""
+    if local_ids is not None and len(local_ids) != len(detections):
+        local_ids = None
+    times = sorted({d.time for d in detections})
+    result = []
+    for at in times:
+        part = [i for i, d in enumerate(detections) if d.time == at]
+        ids = tuple(local_ids[i] for i in part) if local_ids is not None else None
+        result.append((at, [detections[i] for i in part], ids))
+    return result
 
 
 def peer_label_rate(truth: Sequence[TruthFrame], worlds: Sequence[WorldState]) -> float | None:
