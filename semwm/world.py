@@ -557,10 +557,11 @@ class WorldModel:
             limits = bounds[key]
             assert limits is not None
             low, high = limits
-            position = det.position
-            outside = any(
-                v < a or v > b for v, a, b in zip(position, low, high, strict=False)
-            )
+            outside = False
+            for v, a, b in zip(det.position, low, high, strict=False):
+                if v < a or v > b:
+                    outside = True
+                    break
         else:
             outside = outside_region(det, self._knowledge, m.R)
         if outside:
