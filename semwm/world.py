@@ -384,7 +384,7 @@ class WorldModel:
     @property
     def cluster_count(self) -> int:
         """Independent groups of hypotheses (clusters)."""
-        return len(self._state.clusters)
+        return self._state.cluster_count
 
     @property
     def object_count(self) -> int:
@@ -394,7 +394,7 @@ class WorldModel:
     @property
     def track_count(self) -> int:
         """Distinct object versions stored, shared by all hypotheses."""
-        return len(self._state.tracks)
+        return self._state.track_count
 
     def replace_knowledge(self, knowledge: Knowledge, *, refuse_held: bool = False) -> None:
         """Use new knowledge from the next detection on. Objects of classes it no longer
@@ -1514,7 +1514,7 @@ class HypothesesView:
     @property
     def cluster_count(self) -> int:
         """:attr:`WorldModel.cluster_count` at the view's moment."""
-        return len(self.committed.clusters)
+        return self.committed.cluster_count
 
     @property
     def log10_joint_hypotheses(self) -> float:

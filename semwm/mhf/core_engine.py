@@ -297,7 +297,16 @@ class CoreState:
 
     @property
     def log10_joint_count(self) -> float:
-        return self.python().log10_joint_count
+        """:attr:`MHFState.log10_joint_count`, from the core's cluster sizes."""
+        return math.fsum(math.log10(size) for size in self.core.cluster_sizes())
+
+    @property
+    def cluster_count(self) -> int:
+        return self.core.cluster_count
+
+    @property
+    def track_count(self) -> int:
+        return self.core.track_count
 
     def top(self, k: int) -> list[Hypothesis]:
         return self.python().top(k)

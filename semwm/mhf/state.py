@@ -149,6 +149,12 @@ class StateView(Protocol):
     @property
     def log10_joint_count(self) -> float: ...
 
+    @property
+    def cluster_count(self) -> int: ...
+
+    @property
+    def track_count(self) -> int: ...
+
     def top(self, k: int) -> list[Hypothesis]: ...
 
 
@@ -194,6 +200,16 @@ class MHFState:
         """log10 of the number of global hypotheses (the product of the clusters'
         counts, which can have thousands of digits)."""
         return math.fsum(math.log10(len(c.hypotheses)) for c in self.clusters)
+
+    @property
+    def cluster_count(self) -> int:
+        """Number of clusters."""
+        return len(self.clusters)
+
+    @property
+    def track_count(self) -> int:
+        """Number of stored object versions."""
+        return len(self.tracks)
 
     def top(self, k: int) -> list[Hypothesis]:
         """The ``k`` most probable global hypotheses, best first.

@@ -652,6 +652,15 @@ impl PyState {
         self.state.tracks.len()
     }
 
+    /// Each cluster's number of hypotheses.
+    fn cluster_sizes(&self) -> Vec<usize> {
+        self.state
+            .clusters
+            .iter()
+            .map(|c| c.hypotheses.len())
+            .collect()
+    }
+
     /// Each cluster's identity (the address of its shared value: equal between two
     /// states while both are alive exactly when the cluster is the same one).
     fn cluster_ids(&self) -> Vec<usize> {
