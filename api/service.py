@@ -549,6 +549,12 @@ class WorldService:
             placed = [
                 d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
             ]
+            # the world model takes the checked values as they are (no second validation of
+            # every detection); the journal keeps their plain form
+            values = [
+                d if isinstance(d, Detection) else placed[i]
+                for i, d in enumerate(placement.detections)
+            ]
         if sensor is not None:
             _check_sensor(sensor)  # before the journal writes it (issue 30)
         started = time.perf_counter()
@@ -559,7 +565,7 @@ class WorldService:
                 with self._hooked(batch_record(placed, sensor)):
                     replayed, began = self._model.replayed_scans, time.perf_counter()
                     with stage("model"):
-                        result = self._model.ingest(placed, sensor=sensor)
+                        result = self._model.ingest(values, sensor=sensor)
                     replayed = self._model.replayed_scans - replayed
                     if replayed > 0:  # its share of the time: the scans it processed again
                         took = time.perf_counter() - began
