@@ -28,6 +28,20 @@ Writes ``engines.json`` and ``engines.md`` to ``benchmarks/out/``
 (``benchmarks/results/`` with ``--update-results``).
 
     python benchmarks/bench_engines.py [--quick] [--repeats R] [--seeds S] [--update-results]
+
+``--parity-seeds N`` (N = 20 when no number is given) runs the parity check of issue 29
+alone, and only it: every scenario of ``semwm.sim.scenarios.SCENARIOS`` (sizes in
+:data:`PARITY_CASES`), the kick trials of ``semwm.sim.kick`` and robocup under the
+``paper`` association model, each over seeds 0 to N - 1, with both engines in step
+(:class:`Lockstep`: every call the same answer or the same exception; after each the
+published world, ``world(min_existence=1e-6)``, the hypothesis count and the 20 best
+hypotheses' probabilities; every 10 calls the world half the reorder window back, now
+and 0.5 s ahead). Per scenario it writes the frames and objects compared, whether ids,
+classes, labels, confidence states and counts were equal everywhere, and the largest
+difference of any published number to ``engines_parity.json`` and ``.md``
+(``engines_parity_quick.*`` with ``--quick``: 2 seeds).
+
+    python benchmarks/bench_engines.py --parity-seeds [N] [--quick] [--update-results]
 """
 
 from __future__ import annotations
@@ -38,23 +52,31 @@ import math
 import pstats
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
+from unittest import mock
+
+from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baselines import RESULTS, add_output_arguments, fmt, machine_info, write_results
+from baselines import BENCHMARKS, RESULTS, add_output_arguments, fmt, machine_info, write_results
 
-from semwm.detection import Detection
+from semwm.detection import BeforeHistoryError, Detection
 from semwm.filters.engine import ENGINES, Engine, engine_description, rust_core
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.sim import kick
+from semwm.sim.leftbehind import SensorViews
 from semwm.sim.runner import scans
-from semwm.sim.scenarios import make_scenario
+from semwm.sim.scenarios import SCENARIOS as SCENARIO_GENERATORS
+from semwm.sim.scenarios import Scenario, make_scenario
 from semwm.world import WorldModel
-from semwm.world_types import WorldObject
+from semwm.world_types import WorldObject, WorldState
 
 Scan = list[Detection]
 SCENARIOS: dict[str, dict[str, Any]] = {"sim2": {}, "robocup": {"duration": 2.0}}
@@ -317,10 +339,28 @@ def filter_share(engines: tuple[Engine, ...]) -> dict[str, Any]:
 
 
 def _numbers(obj: WorldObject) -> list[float]:
+    """Every number a published object has: position, velocity, covariance, existence,
+    last seen and created, mode and class probabilities, confidence."""
     values = [*obj.position, *(obj.velocity or ()), *sum(obj.covariance, ()), obj.existence]
+    values += [obj.last_seen, obj.created]
     values += [*(obj.mode_probabilities or {}).values()]
     values += [*(obj.class_probabilities or {}).values()]
+    values += [] if obj.confidence is None else [obj.confidence.value]
     return values
+
+
+def _keys(obj: WorldObject) -> tuple[Any, ...]:
+    """What must be equal: id, class, label, the modes and classes named, the confidence
+    state, whether it is tentative."""
+    return (
+        obj.id,
+        obj.cls,
+        obj.label,
+        tuple(obj.mode_probabilities or ()),
+        tuple(obj.class_probabilities or ()),
+        None if obj.confidence is None else obj.confidence.state,
+        obj.tentative,
+    )
 
 
 def parity(seeds: int) -> dict[str, Any]:
@@ -356,6 +396,353 @@ def parity(seeds: int) -> dict[str, Any]:
             "largest_difference": largest,
         }
     return result
+
+
+# --------------------------------------------------------------- the parity mode
+QUERIES_EVERY = 10
+"""Every this many calls the world is also asked for in the past, now and ahead."""
+HYPOTHESES = 20
+"""The most probable hypotheses compared (their probabilities, rank by rank)."""
+TOLERANCE = 1e-9
+"""Issue 29: published numbers within this of each other."""
+
+
+@dataclass(frozen=True)
+class ParityCase:
+    """One row of the parity run: a scenario with its sizes, run by :func:`parity_run`."""
+
+    label: str
+    scenario: str  # a name of semwm.sim.scenarios.SCENARIOS, or "kick" (semwm.sim.kick)
+    sizes: dict[str, Any] = field(default_factory=dict)
+    covers: str = ""  # what it exercises (the results' last column)
+    reorder_window: float = 1.0
+    views: bool = False  # leftbehind's poses as sensor views (SensorViews), empty scans
+    association_model: str | None = None  # another model than the knowledge's
+
+
+PARITY_CASES: tuple[ParityCase, ...] = (
+    ParityCase("sim1", "sim1", covers="paper 002 sim. 1 (20 s): taxonomy, class labels, clutter"),
+    ParityCase("sim2", "sim2", covers="paper 002 sim. 2: an IMM person, door relations, misses"),
+    ParityCase("robocup", "robocup", covers="10 s: robots' labelled self-reports, 5 m ranges"),
+    ParityCase("grid", "grid", covers="25 static objects seen every frame, 5 s; the region"),
+    ParityCase(
+        "tabletop_wrong_labels",
+        "tabletop_wrong_labels",
+        covers="wrong and superclass labels, confusion",
+    ),
+    ParityCase("corner_occlusion", "corner_occlusion", covers="a person hidden 2-4 s twice"),
+    ParityCase("door_exits", "door_exits", covers="people entering and leaving by the door, 60 s"),
+    ParityCase("datasheet", "datasheet", covers="learnt coverage (scan hulls), 60 s"),
+    ParityCase("patrol", "patrol", covers="a moving 6 m scanner: range coverage, 90 s"),
+    ParityCase(
+        "leftbehind, no poses",
+        "leftbehind",
+        {"poses": False},
+        "200 s: learnt coverage of a patrolling robot and a fixed camera",
+        reorder_window=0.0,
+    ),
+    ParityCase(
+        "leftbehind, views",
+        "leftbehind",
+        {"poses": True},
+        "200 s: sensor views (looked at), empty scans",
+        reorder_window=0.0,
+        views=True,
+    ),
+    ParityCase("region_edge", "region_edge", covers="3-D, objects on the region's edges"),
+    ParityCase(
+        "kick, 5 trials",
+        "kick",
+        {"trials": 5},
+        "paper 004's closed loop: a kick (act), views, a teammate's late messages",
+    ),
+    ParityCase(
+        "robocup 5 s, paper",
+        "robocup",
+        {"duration": 5.0},
+        "the paper association model (one cluster, eqs. 5-8)",
+        association_model="paper",
+    ),
+)
+"""Every scenario of semwm.sim.scenarios.SCENARIOS, the kick, and the paper model."""
+
+
+@dataclass
+class Tally:
+    """What one run of a case compared, and the differences found."""
+
+    frames: int = 0  # calls that may change the world (scans, empty scans, actions)
+    objects: int = 0  # published objects compared after them
+    queries: int = 0  # world() answers compared at other times (past, now, ahead)
+    differing: int = 0  # calls after which something discrete differed
+    largest: float = 0.0  # the largest difference of a published number
+    largest_hypotheses: float = 0.0  # of the best hypotheses' probabilities
+    first: str | None = None  # the first difference, said in words
+
+    def add(self, other: Tally) -> None:
+        self.frames += other.frames
+        self.objects += other.objects
+        self.queries += other.queries
+        self.differing += other.differing
+        self.largest = max(self.largest, other.largest)
+        self.largest_hypotheses = max(self.largest_hypotheses, other.largest_hypotheses)
+        self.first = self.first or other.first
+
+
+def _largest(a: list[float], b: list[float]) -> float:
+    return max((abs(x - y) for x, y in zip(a, b, strict=True)), default=0.0)
+
+
+class Lockstep:
+    """Both engines fed the same calls, the Python engine first; quacks like a
+    ``WorldModel`` (``ingest``, ``act``, ``world``) and answers with the Python engine's
+    values, so a closed loop (``semwm.sim.kick``) or ``SensorViews`` drives both. Every
+    difference is tallied (:class:`Tally`), none raised: the run goes on."""
+
+    def __init__(self, knowledge: Knowledge, tally: Tally, **options: Any) -> None:
+        self.python = WorldModel(knowledge, engine="python", **options)
+        self.rust = WorldModel(knowledge, engine="rust", **options)
+        self.tally = tally
+
+    def _differs(self, what: str) -> None:
+        self.tally.differing += 1
+        if self.tally.first is None:
+            self.tally.first = f"call {self.tally.frames}: {what}"
+
+    def _both(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, Any]:
+        outcomes: list[tuple[Any, Exception | None]] = []
+        for model in (self.python, self.rust):
+            try:
+                outcomes.append((getattr(model, name)(*args, **kwargs), None))
+            except Exception as error:  # compared, then raised again
+                outcomes.append((None, error))
+        (expected, p_error), (got, r_error) = outcomes
+        if (type(p_error), str(p_error)) != (type(r_error), str(r_error)):
+            self._differs(f"{name}: the Python engine raised {p_error!r}, Rust {r_error!r}")
+        if p_error is not None:
+            raise p_error
+        return expected, got
+
+    def _changed(self, name: str, *args: Any, **kwargs: Any) -> Any:
+        try:
+            expected, got = self._both(name, *args, **kwargs)
+        except Exception:
+            self.compare()
+            raise
+        if got != expected:
+            self._differs(f"{name} answered {expected!r} (Python), {got!r} (Rust)")
+        self.compare()
+        return expected
+
+    def ingest(self, *args: Any, **kwargs: Any) -> Any:
+        return self._changed("ingest", *args, **kwargs)
+
+    def act(self, *args: Any, **kwargs: Any) -> Any:
+        return self._changed("act", *args, **kwargs)
+
+    def world(self, *args: Any, **kwargs: Any) -> WorldState:
+        expected, got = self._both("world", *args, **kwargs)
+        self._same_state(expected, got, "world")
+        state: WorldState = expected
+        return state
+
+    def _same_state(self, expected: WorldState, got: WorldState, what: str) -> bool:
+        """The same objects (keys and count) with every number's difference tallied."""
+        keys = [_keys(o) for o in expected.objects]
+        other = [_keys(o) for o in got.objects]
+        if other != keys or got.time != expected.time:
+            pairs = enumerate(zip(keys, other, strict=False))  # the first object differing
+            at = next((i for i, (a, b) in pairs if a != b), None)
+            said = (
+                f"object {at}: Python {keys[at]}, Rust {other[at]}"
+                if at is not None
+                else f"Python {len(keys)} objects at {expected.time}, Rust {len(other)} at "
+                f"{got.time}"
+            )
+            self._differs(f"{what} at {expected.time}: {said}")
+            return False
+        for e, g in zip(expected.objects, got.objects, strict=True):
+            a, b = _numbers(e), _numbers(g)
+            if len(a) != len(b):
+                self._differs(f"{what}: object {e.id} has other numbers")
+                return False
+            self.tally.largest = max(self.tally.largest, _largest(a, b))
+        return True
+
+    def compare(self) -> None:
+        """After a call: the published world, counts and best hypotheses; every
+        :data:`QUERIES_EVERY` calls the world in the past, now and 0.5 s ahead."""
+        python, rust, tally = self.python, self.rust, self.tally
+        expected = python.world(min_existence=1e-6)
+        self._same_state(expected, rust.world(min_existence=1e-6), "the world")
+        tally.objects += len(expected.objects)
+        counts = ("hypothesis_count", "cluster_count", "track_count", "object_count")
+        for name in (*counts, "latest_time", "replayed_scans"):
+            if getattr(rust, name) != getattr(python, name):
+                self._differs(f"{name}: Python {getattr(python, name)}, Rust {getattr(rust, name)}")
+        p_best = [h.probability for h in python.hypotheses(HYPOTHESES)]
+        r_best = [h.probability for h in rust.hypotheses(HYPOTHESES)]
+        if len(p_best) != len(r_best):
+            self._differs(f"{len(p_best)} best hypotheses (Python), {len(r_best)} (Rust)")
+        else:
+            tally.largest_hypotheses = max(tally.largest_hypotheses, _largest(p_best, r_best))
+        tally.frames += 1
+        now = python.latest_time
+        if tally.frames % QUERIES_EVERY == 0 and now is not None:
+            window = python.reorder_window
+            for at in ([now - 0.5 * window] if window > 0.0 else []) + [now, now + 0.5]:
+                try:
+                    answers = self._both("world", at, min_existence=1e-6)
+                except BeforeHistoryError:
+                    continue  # both refused alike (_both compared the messages)
+                self._same_state(*answers, f"world({at:g})")
+                tally.queries += 1
+
+
+def _scenario_knowledge(scenario: Scenario, model: str | None) -> Knowledge:
+    """The knowledge a scenario is meant for (shipped, or its ``knowledge_dir``), with the
+    grid's region and another association model where asked for."""
+    directory = scenario.metadata.get("knowledge_dir")
+    if isinstance(directory, str):
+        knowledge = load_knowledge(BENCHMARKS.parent / directory / scenario.knowledge_file)
+    else:
+        knowledge = load_knowledge(shipped_knowledge_path(scenario.knowledge_file))
+    update: dict[str, Any] = {}
+    if scenario.name == "grid":
+        update["region"] = tuple(tuple(r) for r in scenario.region)
+    if model is not None:
+        update["association_model"] = model
+    if update:
+        world = knowledge.world.model_copy(update=update)
+        knowledge = knowledge.model_copy(update={"world": world})
+    return knowledge
+
+
+@contextmanager
+def _kick_in_lockstep(tally: Tally) -> Iterator[None]:
+    """``semwm.sim.kick`` makes its world models in ``run_trial``: each is a
+    :class:`Lockstep` meanwhile."""
+
+    def made(knowledge: Knowledge, **options: Any) -> Lockstep:
+        return Lockstep(knowledge, tally, **options)
+
+    with mock.patch.object(kick, "WorldModel", made):
+        yield
+
+
+def parity_run(case: ParityCase, seed: int) -> Tally:
+    """One case and seed with both engines in step."""
+    tally = Tally()
+    if case.scenario == "kick":
+        knowledge = load_knowledge(shipped_knowledge_path("robocup_kick.yaml"))
+        with _kick_in_lockstep(tally):
+            kick.run_kick(knowledge, seed, trials=int(case.sizes["trials"]))
+        return tally
+    scenario = make_scenario(case.scenario, seed, **case.sizes)
+    knowledge = _scenario_knowledge(scenario, case.association_model)
+    both = Lockstep(knowledge, tally, reorder_window=case.reorder_window)
+    model: Lockstep | SensorViews = SensorViews(both, scenario) if case.views else both
+    for scan in scans(scenario.detections):
+        model.ingest(scan)
+    return tally
+
+
+def run_parity(
+    seeds: int, cases: tuple[ParityCase, ...] = PARITY_CASES, *, require_all: bool = True
+) -> dict[str, Any]:
+    """Every case over seeds 0 to ``seeds`` - 1: the tallies per case and seed.
+    ``require_all``: refuse to run without a case for every scenario of SCENARIOS."""
+    if rust_core() is None:
+        raise SystemExit("bench_engines: semwm._core is not built (docs/engines.md)")
+    missing = sorted(set(SCENARIO_GENERATORS) - {case.scenario for case in cases})
+    if missing and require_all:
+        raise SystemExit(f"bench_engines: no parity case for {', '.join(missing)}")
+    rows = []
+    started = time.process_time()
+    with tqdm(total=len(cases) * seeds, desc="parity", unit="run") as bar:
+        for case in cases:
+            total = Tally()
+            per_seed = []
+            spent = time.process_time()
+            for seed in range(seeds):
+                bar.set_postfix_str(f"{case.label}, seed {seed}")
+                tally = parity_run(case, seed)
+                if tally.first is not None:
+                    tally.first = f"seed {seed}, {tally.first}"
+                    tqdm.write(f"{case.label}: {tally.first}")
+                per_seed.append({"seed": seed, **asdict(tally)})
+                total.add(tally)
+                bar.update()
+            rows.append(
+                {
+                    "case": case.label,
+                    "scenario": case.scenario,
+                    "sizes": case.sizes,
+                    "covers": case.covers,
+                    "reorder_window": case.reorder_window,
+                    "seeds": seeds,
+                    **asdict(total),
+                    "equal": total.differing == 0,
+                    "cpu_seconds": time.process_time() - spent,
+                    "per_seed": per_seed,
+                }
+            )
+    return {
+        "machine": machine_info(),
+        "engines": {engine: engine_description(engine) for engine in ENGINES},
+        "seeds": seeds,
+        "queries_every": QUERIES_EVERY,
+        "hypotheses": HYPOTHESES,
+        "cpu_seconds": time.process_time() - started,
+        "cases": rows,
+    }
+
+
+def parity_markdown(doc: dict[str, Any]) -> str:
+    machine = doc["machine"]
+    equal = all(row["equal"] for row in doc["cases"])
+    largest = max((row["largest"] for row in doc["cases"]), default=0.0)
+    holds = equal and largest <= TOLERANCE
+    lines = [
+        "# Parity of the Python and the Rust engine (bench_engines.py --parity-seeds)",
+        "",
+        f"{machine['date']}, commit {machine.get('commit')}, {machine['processor']}, "
+        f"{machine['cpu_count']} cores, Python {machine['python']}; engines "
+        f"{', '.join(doc['engines'].values())}; seeds 0-{doc['seeds'] - 1}; "
+        f"{doc['cpu_seconds'] / 60.0:.1f} min of CPU.",
+        "",
+        "Both engines in step, every call (scans, empty scans with a sensor view, kicks, "
+        "late scans) compared: what it answered or raised; after it the published world "
+        "(`world(min_existence=1e-6)`: ids, classes, labels, modes and classes named, "
+        "confidence states, tentative flags, and every number: position, velocity, "
+        "covariance, existence, last seen, created, mode and class probabilities, "
+        "confidence), the hypothesis, cluster, version and object counts, the "
+        f"{doc['hypotheses']} best hypotheses' probabilities; every "
+        f"{doc['queries_every']} calls the world half the reorder window back, now and "
+        '0.5 s ahead. "calls differing": calls after which something that must be '
+        "equal was not.",
+        "",
+        f"**Parity {'holds' if holds else 'does not hold'}: ids, classes, labels and "
+        f"counts {'equal everywhere' if equal else 'differ'}; the largest difference of a "
+        f"published number {largest:.2g} (issue 29: at most {TOLERANCE:g}).**",
+        "",
+        "| case | seeds | calls | objects compared | queries | ids, classes, labels, "
+        "counts equal | calls differing | largest difference | largest hypothesis "
+        "difference | CPU s | covers |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in doc["cases"]:
+        lines.append(
+            f"| {row['case']} | {row['seeds']} | {row['frames']:,} | {row['objects']:,} "
+            f"| {row['queries']:,} | {'yes' if row['equal'] else '**no**'} "
+            f"| {row['differing']} | {row['largest']:.2g} "
+            f"| {row['largest_hypotheses']:.2g} | {row['cpu_seconds']:.0f} | {row['covers']} |"
+        )
+    firsts = [row for row in doc["cases"] if row["first"]]
+    if firsts:
+        lines += ["", "First difference per case:", ""]
+        lines += [f"- {row['case']}: {row['first']}" for row in firsts]
+    return "\n".join(lines) + "\n"
 
 
 def run(quick: bool, repeats: int, seeds: int) -> dict[str, Any]:
@@ -474,8 +861,30 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--quick", action="store_true", help="grid N = 50 only, 1 repeat")
     parser.add_argument("--repeats", type=int, default=3, help="runs per engine (best kept)")
     parser.add_argument("--seeds", type=int, default=5, help="seeds of the parity check")
+    parser.add_argument(
+        "--parity-seeds",
+        type=int,
+        nargs="?",
+        const=20,
+        default=None,
+        metavar="N",
+        help="only the parity check of every scenario, over N seeds (20 if no N is given); "
+        "writes engines_parity.*",
+    )
     add_output_arguments(parser)
     args = parser.parse_args(argv)
+    if args.parity_seeds is not None:
+        seeds = min(args.parity_seeds, 2) if args.quick else args.parity_seeds
+        doc = run_parity(seeds)
+        write_results(
+            RESULTS,
+            "engines_parity",
+            doc,
+            parity_markdown(doc),
+            args.quick,
+            update_results=args.update_results,
+        )
+        return doc
     repeats = 1 if args.quick else args.repeats
     seeds = min(args.seeds, 2) if args.quick else args.seeds
     doc = run(args.quick, repeats, seeds)
