@@ -214,7 +214,10 @@ def in_view_probability(
         if margin is not None:  # the distance to that edge (a ray from the sensor)
             to_edge = np.where(slack >= 0.5 * np.pi, distance, distance * np.sin(slack))
             inside &= to_edge >= m
-    result: FloatArray = inside.astype(float) @ _GRID_W
+    # the weights of the nodes in view summed in node order, row by row (a matrix-vector
+    # product rounds a row by its place in the batch: equal objects would differ in the
+    # last bit, and hypotheses that tie exactly would not)
+    result: FloatArray = np.cumsum(inside * _GRID_W, axis=1)[:, -1]
     return result
 
 
