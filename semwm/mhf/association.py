@@ -47,7 +47,7 @@ from semwm.knowledge.coverage import birth_volume, coverage_volume
 from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf import nearby
-from semwm.mhf.classes import ClassModel
+from semwm.mhf.classes import ClassModel, in_order_product
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted, conform
 from semwm.mhf.prune import log_add
@@ -339,7 +339,7 @@ class Associator:
         the detection's detector (:mod:`semwm.mhf.classes`).
         """
         if self.model == "mht":
-            mixed: FloatArray = self._reported(measurements) @ self._class_probs(tracks).T
+            mixed = in_order_product(self._reported(measurements), self._class_probs(tracks))
             return mixed
         track_classes = sorted({t.cls for t in tracks})
         detection_classes = sorted({m.cls for m in measurements})
@@ -403,7 +403,7 @@ class Associator:
         R = np.array([m.R for m in measurements])  # (D, d, d)
         if mht:  # L_class from the class distributions (semwm.mhf.classes)
             probs, reported = self._class_probs(tracks), self._reported(measurements)
-            likelihood: FloatArray = reported @ probs.T  # (D, T)
+            likelihood: FloatArray = in_order_product(reported, probs)  # (D, T)
         else:
             likelihood = self._class_likelihoods(tracks, measurements)  # (D, T): eq. (8)
         sparse = self._sparse_gate(predicted, measurements, z, R, likelihood)

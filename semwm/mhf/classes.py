@@ -41,6 +41,17 @@ PUBLISH_MASS = 0.5
 """A class is published when its subtree holds more than this probability."""
 
 
+def in_order_product(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a @ b.T`` (``(N, K)`` and ``(M, K)`` to ``(N, M)``) with each entry summed over
+    ``k`` in order. A matrix product through BLAS rounds an entry by its place in the
+    batch (equal rows can differ in the last bit), and a tie between equal objects would
+    then be broken by where they stand; summed in order, equal rows give equal sums."""
+    result: FloatArray = np.zeros((a.shape[0], b.shape[0]))
+    for k in range(a.shape[1]):
+        result = result + a[:, k, None] * b[None, :, k]
+    return result
+
+
 class ClassModel:
     """The class space of a knowledge base and each detector's confusion likelihoods.
 
@@ -110,7 +121,7 @@ class ClassModel:
         Among the classes holding more than half, the deepest wins, then the larger
         mass, then the first name; with none, the most probable class.
         """
-        mass = probabilities @ self.subtree.T  # (N, K): mass of each class's subtree
+        mass = in_order_product(probabilities, self.subtree)  # (N, K): each subtree's mass
         candidate = mass > PUBLISH_MASS + 1e-12
         score = np.where(candidate, self.depth[None, :] * 4.0 + mass, -np.inf)
         chosen: npt.NDArray[np.intp] = np.argmax(score, axis=1)
