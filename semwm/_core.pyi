@@ -188,12 +188,6 @@ class Book:
 
 class Engine:
     def __init__(self, tables: dict[str, object]) -> None: ...
-    def process_scan(
-        self,
-        state: State,
-        measurements: list[tuple[object, ...]],
-        view: tuple[object, ...] | None = None,
-    ) -> State: ...
     def process_measurements(
         self, state: State, measurements: list[Any], view: tuple[object, ...] | None = None
     ) -> State: ...

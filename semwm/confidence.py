@@ -84,11 +84,16 @@ class ConfidenceBook:
 
     def at(self, lineage: int, time: float, spec: ResolvedClass) -> float:
         """The lineage's confidence carried to ``time`` with no scan in between."""
-        entry = self.values.get(lineage)
-        if entry is None:
-            return 1.0
-        value, since = entry
-        return value * math.exp(-spec.confidence_decay * max(0.0, time - since))
+        return carried(self.values.get(lineage), time, spec)
+
+
+def carried(entry: tuple[float, float] | None, time: float, spec: ResolvedClass) -> float:
+    """A confidence ``(value, since)`` carried to ``time`` with no scan in between
+    (``c exp(-lambda dt)``); 1 for a lineage the book does not hold."""
+    if entry is None:
+        return 1.0
+    value, since = entry
+    return value * math.exp(-spec.confidence_decay * max(0.0, time - since))
 
 
 def representatives(state: StateView) -> dict[int, Track]:

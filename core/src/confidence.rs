@@ -15,7 +15,6 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::error::KernelResult;
-use crate::mhf::existence::in_view_probability;
 use crate::mhf::hypotheses::{KeyMap, KeySet};
 use crate::mhf::measurement::SensorView;
 use crate::mhf::predict::predict;
@@ -105,13 +104,7 @@ pub fn advance(
         if !unseen.is_empty() {
             let predicted = predict(&unseen, time, tables)?;
             for (i, v) in unseen.iter().enumerate() {
-                let p = in_view_probability(
-                    predicted.position(i),
-                    predicted.covariance(i),
-                    tables.dim,
-                    &view.view,
-                    None,
-                )?;
+                let p = predicted.in_view(i, &view.view, None)?;
                 if p >= 0.5 || view.looks_at(v.lineage) {
                     looked.insert(v.lineage);
                 }

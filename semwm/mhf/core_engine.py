@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from semwm.confidence import BookView, ConfidenceBook
+from semwm.confidence import BookView, ConfidenceBook, carried
 from semwm.filters import rust
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.rates import FalseAlarms, ObservedRates, SourceClock, StreamCounts
@@ -327,11 +327,7 @@ class CoreBook:
 
     def at(self, lineage: int, time: float, spec: ResolvedClass) -> float:
         """:meth:`ConfidenceBook.at`."""
-        entry = self.core.entry(lineage)
-        if entry is None:
-            return 1.0
-        value, since = entry
-        return value * math.exp(-spec.confidence_decay * max(0.0, time - since))
+        return carried(self.core.entry(lineage), time, spec)
 
     def python(self) -> ConfidenceBook:
         values, poses, scans = self.core.state()
@@ -387,21 +383,6 @@ class CoreEngine:
         view_row = None if view is None else self._view(view)
         after = self.engine.process_measurements(core, list(measurements), view_row)
         return CoreState(after, self)
-
-    def _row(self, m: Measurement) -> tuple[Any, ...]:
-        return (
-            m.seq,
-            float(m.time),
-            self.index[m.cls],
-            m.z.tolist(),
-            m.R.ravel().tolist(),
-            self.detectors[m.detector],
-            m.source or "",
-            m.label,
-            float(m.clutter_rate),
-            None if m.sensor is None else m.sensor.tolist(),
-            float(m.time_std),
-        )
 
     def _view(self, view: SensorView) -> tuple[Any, ...]:
         return (

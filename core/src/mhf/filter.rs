@@ -26,7 +26,7 @@ use std::sync::Arc;
 use crate::error::{KernelError, KernelResult};
 use crate::mhf::association::{self, Inputs, ScanOption};
 use crate::mhf::coverage::symmetric_eigen;
-use crate::mhf::existence::{in_view_probability, inside_probability, missed, survive};
+use crate::mhf::existence::{inside_probability, missed, survive};
 use crate::mhf::expansion::{self, split_with, Op};
 use crate::mhf::hypotheses::{fsum, prune, Cluster, Hypothesis, KeyMap, KeySet, Merged};
 use crate::mhf::measurement::{Measurement, SensorView};
@@ -567,13 +567,7 @@ impl Filter {
             clusters = self.undetected(clusters, &by_key, &table)?;
             // an object the view did not hold had no chance to be detected again
             for (i, row) in predicted.rows.iter().enumerate() {
-                let held = in_view_probability(
-                    predicted.position(i),
-                    predicted.covariance(i),
-                    tables.dim,
-                    &view.view,
-                    None,
-                )?;
+                let held = predicted.in_view(i, &view.view, None)?;
                 if held < 0.5 {
                     out_of_view.insert(row.version.lineage);
                 }
@@ -708,13 +702,8 @@ impl Filter {
         let mut log_q = Vec::with_capacity(predicted.len());
         for (i, row) in predicted.rows.iter().enumerate() {
             let version = &row.version;
-            let inside = in_view_probability(
-                predicted.position(i),
-                predicted.covariance(i),
-                tables.dim,
-                &view.view,
-                if eroded { Some(edges[i]) } else { None },
-            )?;
+            let inside =
+                predicted.in_view(i, &view.view, if eroded { Some(edges[i]) } else { None })?;
             let p = if seen.contains(&version.key) {
                 0.0
             } else {

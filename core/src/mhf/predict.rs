@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use crate::error::KernelResult;
 use crate::filters::batched;
+use crate::mhf::existence::{in_view_probability, View};
 use crate::mhf::state::{FilterState, Version};
 use crate::mhf::tables::Tables;
 
@@ -47,6 +48,12 @@ impl Predicted {
     pub fn covariance(&self, i: usize) -> &[f64] {
         let dd = self.dim * self.dim;
         &self.covariance[i * dd..(i + 1) * dd]
+    }
+
+    /// The probability that row `i` lies in `view` (`in_view_probability`), the view
+    /// eroded by `margin` (m) if given.
+    pub fn in_view(&self, i: usize, view: &View, margin: Option<f64>) -> KernelResult<f64> {
+        in_view_probability(self.position(i), self.covariance(i), self.dim, view, margin)
     }
 
     /// Row `i`'s predicted velocity (`d`): its combined mean's entries after the

@@ -146,22 +146,6 @@ fn to_py_err(error: KernelError) -> PyErr {
     PyValueError::new_err(error.to_string())
 }
 
-/// One detection as it crosses: seq, time, class index, z, R (flat `d x d`), detector
-/// index, source (`""` for none), label, clutter rate, sensor position, time std.
-type MeasurementRow = (
-    u64,
-    f64,
-    usize,
-    Vec<f64>,
-    Vec<f64>,
-    usize,
-    String,
-    Option<String>,
-    f64,
-    Option<Vec<f64>>,
-    f64,
-);
-
 /// A sensor view: time, source (`""`), position (x, y), heading, range, half opening,
 /// lineages looked at, detector index.
 type ViewRow = (
@@ -323,55 +307,6 @@ impl PyEngine {
         })
     }
 
-    /// The state after one scan (`MultipleHypothesisFilter.process_scan`): detections
-    /// sharing a source and a time, and where the sensor looked (or `None`).
-    #[pyo3(signature = (state, measurements, view=None))]
-    fn process_scan(
-        &self,
-        py: Python<'_>,
-        state: &PyState,
-        measurements: Vec<MeasurementRow>,
-        view: Option<ViewRow>,
-    ) -> PyResult<PyState> {
-        let tables = &self.filter.tables;
-        let (d, k) = (tables.dim, tables.class_count());
-        let mut scan = Vec::with_capacity(measurements.len());
-        for (j, row) in measurements.into_iter().enumerate() {
-            let (seq, time, cls, z, r, detector, source, label, clutter_rate, sensor, time_std) =
-                row;
-            if cls >= k || detector >= tables.detectors.len() || z.len() != d || r.len() != d * d {
-                return Err(PyValueError::new_err(format!(
-                    "measurements[{j}]: expected a class below {k}, a detector below {}, \
-                     z of {d} and R of {} values",
-                    tables.detectors.len(),
-                    d * d
-                )));
-            }
-            scan.push(Measurement {
-                seq,
-                time,
-                cls,
-                z,
-                r,
-                detector,
-                source: Name::from(source),
-                label: label.map(Name::from),
-                clutter_rate,
-                sensor,
-                time_std,
-            });
-        }
-        let view = view.map(sensor_view);
-        let filter = self.filter.clone();
-        let before = state.state.clone();
-        let after = run(py, "Engine.process_scan", move || {
-            filter.process_scan(&before, &scan, view.as_ref())
-        })?;
-        Ok(PyState {
-            state: Arc::new(after),
-        })
-    }
-
     /// The published world of `state` (`WorldModel._current`): `(lineage, key, class
     /// index, serial)` of each object shown, in the specification's order; `shown` the
     /// lineages published now, `ids` their ids.
@@ -438,10 +373,11 @@ impl PyEngine {
         })
     }
 
-    /// `process_scan` of the Python engine's measurements as they are
-    /// (`semwm.mhf.measurement.Measurement` named tuples: seq, time, class, z, R,
-    /// detector, source, label, clutter rate, sensor, time std), read here without a
-    /// Python row per detection.
+    /// The state after one scan (`MultipleHypothesisFilter.process_scan`): the Python
+    /// engine's measurements as they are (`semwm.mhf.measurement.Measurement` named
+    /// tuples: seq, time, class, z, R, detector, source, label, clutter rate, sensor,
+    /// time std; detections sharing a source and a time), read here without a Python
+    /// row per detection, and where the sensor looked (or `None`).
     #[pyo3(signature = (state, measurements, view=None))]
     fn process_measurements(
         &self,
