@@ -55,7 +55,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.special import ndtr
@@ -185,64 +185,6 @@ MIN_EVIDENCE_SECONDS = 10.0
 
 MIN_EVIDENCE_SCANS = 20.0
 """A stream's detection rate of a class is judged after this many expected detections."""
-
-
-class StreamRates(Protocol):
-    """The observed rates as a scan uses them: :class:`ObservedRates` (the
-    specification) or the Rust engine's
-    (:class:`semwm.mhf.rust_rates.CoreObservedRates`, the same state kept in the core)."""
-
-    def report(self, knowledge: Knowledge) -> list[StreamReport]: ...
-
-    def miss_span(self, source: str, time: float) -> float: ...
-
-    @staticmethod
-    def watched(
-        scan: ScanCoverage,
-        sources: Sequence[frozenset[str]],
-        positions: FloatArray,
-        margins: FloatArray,
-        unconfirmed: Sequence[bool],
-        spread: FloatArray | None = None,
-        ranged: RangeCoverage | None = None,
-        hull: HullDistance | None = None,
-    ) -> FloatArray: ...
-
-    def detection_probabilities(
-        self, source: str, detector: str, priors: Mapping[str, float]
-    ) -> dict[str, float]: ...
-
-    def source_rates(
-        self,
-        source: str,
-        lineages: Sequence[int],
-        class_rates: FloatArray,
-        classes: Sequence[str],
-    ) -> FloatArray: ...
-
-    def from_stream(
-        self,
-        stream: StreamKey,
-        lineages: Sequence[int],
-        class_rates: FloatArray,
-        time: float,
-        classes: Sequence[str] | None = None,
-        unconfirmed: Sequence[bool] | None = None,
-    ) -> FloatArray: ...
-
-    def after_scan(
-        self,
-        source: str,
-        time: float,
-        detected: Mapping[str, Iterable[int]],
-        born: Mapping[str, Iterable[int]],
-        alive: frozenset[int] | set[int],
-        position: tuple[float, ...] | None = None,
-        classes: Mapping[int, str] | None = None,
-        born_elsewhere: Mapping[str, Iterable[int]] | None = None,
-        scanned: Collection[str] | None = None,
-        out_of_view: Collection[int] = frozenset(),
-    ) -> StreamRates: ...
 
 
 @dataclass(frozen=True)
@@ -401,19 +343,6 @@ class ObservedRates:
             near[rows] = hull(positions[rows, :d], scan.positions[:, :d]) <= radius[rows]
         watched = by_source & (near | np.asarray(unconfirmed, dtype=bool))
         result: FloatArray = watched.astype(float)
-        return result
-
-    def detection_probabilities(
-        self, source: str, detector: str, priors: Mapping[str, float]
-    ) -> dict[str, float]:
-        """Per class of ``priors``, the per-scan detection probability the stream
-        ``(source, detector)`` is observed to have (prior mean: the class's entry of
-        ``priors``), once it has expected :data:`MIN_EVIDENCE_SCANS` detections of it."""
-        result = {}
-        for (s, d, cls), counts in self.streams.items():
-            enough = counts.expected >= MIN_EVIDENCE_SCANS
-            if s == source and d == detector and cls in priors and enough:
-                result[cls] = counts.detection_probability(priors[cls])
         return result
 
     def source_rates(
