@@ -193,6 +193,8 @@ def out_of_range(det: Detection, knowledge: Knowledge, R: np.ndarray | None = No
     for value in offset:
         squared += value * value
     distance = math.sqrt(squared)  # what np.linalg.norm computes
+    if distance <= detector.range:
+        return False  # within the range itself: whatever the margin (>= 0)
     margin = 0.0
     p = knowledge.world.gate_probability
     if R is not None and distance > 0.0 and p < 1.0:
