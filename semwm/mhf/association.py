@@ -50,7 +50,7 @@ from semwm.mhf import nearby
 from semwm.mhf.classes import ClassModel, in_order_product
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.predict import Predicted, conform
-from semwm.mhf.prune import log_add
+from semwm.mhf.prune import TIE, log_add
 from semwm.mhf.state import Track
 
 BoolArray = npt.NDArray[np.bool_]
@@ -308,7 +308,7 @@ class Associator:
                 continue
             log_clutter = _log(m.clutter_rate) + self.clutter_log_density[m.detector]
             new_log = _log(classes[m.cls].new_frequency) + spread_uniform
-            if log_norm + log_add(log_clutter, new_log) >= log_update + log_ratio:
+            if log_norm + log_add(log_clutter, new_log) >= log_update + log_ratio - TIE:
                 continue  # "new object or clutter" survives eq. (3): the general path
             result[j] = SettledUpdate(m, old_key, updated)
         return result

@@ -42,7 +42,7 @@ from semwm.mhf.existence import looked_at, near_rate, region_margins
 from semwm.mhf.kernels import existence_kernels
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted, predict_tracks
-from semwm.mhf.prune import log_add, merge, prune
+from semwm.mhf.prune import TIE, log_add, merge, prune
 from semwm.mhf.rates import MIN_EVIDENCE_SCANS, ObservedRates, ScanCoverage
 from semwm.mhf.similar import merge_similar
 from semwm.mhf.state import Cluster, Hypothesis, MHFState, StateView, Track
@@ -852,7 +852,7 @@ class MultipleHypothesisFilter:
         existing = option.existing
         for k in existing.keys() & parent.tracks:
             best = max(best, existing[k][1])
-        return parent.log_weight + best + self.log_ratio
+        return parent.log_weight + best + self.log_ratio - TIE
 
     def _certain_update(
         self, book: _ClusterBook, touched: set[int], option: DetectionOptions, table: _TrackTable
@@ -877,7 +877,7 @@ class MultipleHypothesisFilter:
         if log_update == -math.inf:
             return None
         log_unassigned = log_norm + log_add(option.log_clutter, option.new_log)
-        if log_unassigned >= log_update + math.log(self.ratio):
+        if log_unassigned >= log_update + math.log(self.ratio) - TIE:
             return None  # both children are kept: the general path
         return _certain(updated)
 
@@ -961,7 +961,7 @@ def _product(
         # combinations below eq. (3)'s floor are pruned: skip them before building their
         # sets (the clusters hold disjoint objects, so no two combinations merge)
         best = max(a.log_weight for a in result) + max(b.log_weight for b in hypotheses)
-        floor = best + math.log(ratio) if ratio > 0.0 else -math.inf
+        floor = best + math.log(ratio) - TIE if ratio > 0.0 else -math.inf
         result = prune(
             merge(
                 (a.tracks | b.tracks, a.log_weight + b.log_weight, a.rate + b.rate)

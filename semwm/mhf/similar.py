@@ -31,7 +31,7 @@ from typing import cast
 
 import numpy as np
 
-from semwm.mhf.prune import log_add
+from semwm.mhf.prune import log_add, ties_in_order
 from semwm.mhf.state import Hypothesis, Track
 
 _WIDEN = 1.0 + 1e-6  # the cheap bound's margin against rounding (it must not cut a twin)
@@ -245,4 +245,4 @@ def merge_similar(
         if i not in absorbed
     ]
     result.sort(key=lambda h: h.log_weight, reverse=True)
-    return tuple(result)
+    return tuple(ties_in_order(result))

@@ -20,7 +20,7 @@ pytestmark = needs_rust
 
 def test_other_threads_run_while_the_core_scans() -> None:
     knowledge = load_knowledge(shipped_knowledge_path("grid.yaml"))
-    side = 60  # 3,600 new objects in one scan: long enough to see threads interleave
+    side = 150  # 22,500 new objects in one scan (30-60 ms): long enough to see threads interleave
     region = knowledge.world.region
     assert region is not None
     (x0, x1), (y0, y1) = region[0], region[1]

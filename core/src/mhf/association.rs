@@ -23,7 +23,7 @@ use crate::error::KernelResult;
 use crate::filters::batched;
 use crate::filters::small::{inverse_and_log_det, mahalanobis_squared, quadratic_form};
 use crate::mhf::classes::{self, numpy_sum};
-use crate::mhf::hypotheses::{log_add, KeyMap};
+use crate::mhf::hypotheses::{log_add, KeyMap, TIE};
 use crate::mhf::measurement::Measurement;
 use crate::mhf::predict::{conform, Predicted};
 use crate::mhf::state::{FilterState, Key, Version};
@@ -300,7 +300,7 @@ fn settled_rows(
         let log_clutter =
             log_or_minus_inf(m.clutter_rate) + tables.detectors[m.detector].clutter_log_density;
         let new_log = log_or_minus_inf(tables.classes[m.cls].new_frequency) + spread_uniform;
-        if log_norm + log_add(log_clutter, new_log) >= log_update + inputs.log_ratio {
+        if log_norm + log_add(log_clutter, new_log) >= log_update + inputs.log_ratio - TIE {
             continue; // "new object or clutter" survives eq. (3): the general path
         }
         result[j] = Some((update.old_key, update.version.clone()));

@@ -32,7 +32,7 @@ use std::sync::Arc;
 use crate::error::{KernelError, KernelResult};
 use crate::mhf::hypotheses::{
     checked_ln, holds, log_add, prune, replaced, with_key, Cluster, Hypothesis, KeyMap, KeySet,
-    Merged,
+    Merged, TIE,
 };
 
 /// The filter's settings the algebra reads.
@@ -354,7 +354,7 @@ pub fn product(
     for hypotheses in groups {
         let best = max_weight(&result) + max_weight(&hypotheses);
         let floor = if ratio > 0.0 {
-            best + ratio.ln()
+            best + ratio.ln() - TIE
         } else {
             f64::NEG_INFINITY
         };
@@ -463,7 +463,7 @@ fn update_floor(
             best = e.log_num;
         }
     }
-    parent.log_weight + best + settings.log_ratio()
+    parent.log_weight + best + settings.log_ratio() - TIE
 }
 
 /// `_certain_update`: the cluster `expand` and `split` would give, directly, in the most
@@ -499,7 +499,7 @@ fn certain_update(
         return Ok(None);
     }
     let log_unassigned = log_norm + log_add(option.log_clutter, option.new_log);
-    if log_unassigned >= log_update + settings.ratio.ln() {
+    if log_unassigned >= log_update + settings.ratio.ln() - TIE {
         return Ok(None); // both children are kept: the general path
     }
     Ok(Some(Cluster::certain(e.updated, table.rate(e.updated)?)))

@@ -112,6 +112,38 @@ impl Cluster {
     }
 }
 
+/// Log weights closer than this are a tie (`semwm.mhf.prune.TIE`): the rounding of the
+/// arithmetic that made them never decides (eq. 3's floor keeps what lies within it of
+/// the floor; tied hypotheses are ordered by the objects they hold).
+pub const TIE: f64 = 1e-9;
+
+/// `ties_in_order`: hypotheses (most probable first) with each run of ties (log weights
+/// within `TIE` of the run's first) ordered by their sorted keys.
+pub fn ties_in_order(items: Vec<Hypothesis>) -> Vec<Hypothesis> {
+    let count = items.len();
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    let mut i = 0;
+    while i < count {
+        let mut j = i + 1;
+        while j < count && items[i].log_weight - items[j].log_weight <= TIE {
+            j += 1;
+        }
+        if j - i > 1 {
+            runs.push((i, j));
+        }
+        i = j;
+    }
+    if runs.is_empty() {
+        return items;
+    }
+    let mut items = items;
+    for (start, end) in runs {
+        // stable, as Python's sorted
+        items[start..end].sort_by(|a, b| a.keys.cmp(&b.keys));
+    }
+    items
+}
+
 /// `log(exp(a) + exp(b))` without overflow (`log_add`).
 pub fn log_add(a: f64, b: f64) -> f64 {
     let (a, b) = if a < b { (b, a) } else { (a, b) };
@@ -288,9 +320,10 @@ pub fn prune(merged: Merged, ratio: f64, max_hypotheses: usize) -> KernelResult<
     });
     let best = items[0].log_weight;
     if ratio > 0.0 {
-        let floor = best + ratio.ln();
+        let floor = best + ratio.ln() - TIE;
         items.retain(|h| h.log_weight >= floor);
     }
+    let mut items = ties_in_order(items);
     items.truncate(max_hypotheses);
     let log_total = best + fsum(items.iter().map(|h| (h.log_weight - best).exp())).ln();
     for h in &mut items {
@@ -451,12 +484,12 @@ mod tests {
     }
 
     #[test]
-    fn prune_keeps_ties_in_their_order_and_drops_zero_probability() {
+    fn prune_orders_ties_by_their_objects_and_drops_zero_probability() {
         let pruned = prune(
             merge(vec![
                 h(-1.0, &[5], 0.0),
                 h(f64::NEG_INFINITY, &[6], 0.0),
-                h(-1.0, &[4], 0.0),
+                h(-1.0 - 1e-13, &[4], 0.0), // a tie, rounded apart
                 h(f64::NAN, &[7], 0.0),
             ]),
             0.0,
@@ -464,7 +497,34 @@ mod tests {
         )
         .unwrap();
         let keys: Vec<u64> = pruned.iter().map(|h| h.keys[0]).collect();
-        assert_eq!(keys, vec![5, 4]);
+        assert_eq!(keys, vec![4, 5]);
+    }
+
+    #[test]
+    fn rounding_never_decides_the_floor_or_the_cap() {
+        // exactly alpha of the best in exact arithmetic, a last bit below after rounding
+        let alpha: f64 = 0.01;
+        let at_floor = alpha.ln() - 1e-14;
+        let kept = prune(
+            merge(vec![h(0.0, &[1], 0.0), h(at_floor, &[2], 0.0)]),
+            alpha,
+            10,
+        );
+        assert_eq!(kept.unwrap().len(), 2);
+        // three ties for two places: the two that hold the smallest keys, whatever the bits
+        let capped = prune(
+            merge(vec![
+                h(0.0, &[1], 0.0),
+                h(-1.0 + 1e-14, &[9], 0.0),
+                h(-1.0, &[3], 0.0),
+                h(-1.0 - 1e-14, &[2], 0.0),
+            ]),
+            0.0,
+            3,
+        )
+        .unwrap();
+        let keys: Vec<u64> = capped.iter().map(|h| h.keys[0]).collect();
+        assert_eq!(keys, vec![1, 2, 3]);
     }
 
     #[test]

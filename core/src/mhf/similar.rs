@@ -31,7 +31,7 @@ use std::sync::Arc;
 
 use crate::error::{KernelError, KernelResult};
 use crate::filters::small::MAX_STATE;
-use crate::mhf::hypotheses::{log_add, Hypothesis, KeyMap, KeySet};
+use crate::mhf::hypotheses::{log_add, ties_in_order, Hypothesis, KeyMap, KeySet};
 use crate::mhf::state::{FilterState, Key, Version};
 
 /// Existence, model and class probabilities agree within this (`PROBABILITY_TOLERANCE`).
@@ -645,7 +645,7 @@ pub fn merge_similar(
             .partial_cmp(&a.log_weight)
             .unwrap_or(Ordering::Equal)
     });
-    Ok(Some(result))
+    Ok(Some(ties_in_order(result)))
 }
 
 #[cfg(test)]
