@@ -57,6 +57,7 @@ from semwm.mhf.core_engine import CoreState, VersionRef, as_python, as_python_bo
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted
+from semwm.mhf.prune import TIE
 from semwm.mhf.rates import StreamReport
 from semwm.mhf.state import Cluster, MHFState, StateView, Track
 from semwm.validation import (
@@ -1209,14 +1210,15 @@ class WorldModel:
                 continue
             # shown as a member that already has an id (stable ids), one shown in its
             # version of the most probable hypothesis first (not one that is there only
-            # by another hypothesis's account), else the likeliest
+            # by another hypothesis's account), else the likeliest (existences within
+            # TIE of the largest are a tie: the oldest lineage, not rounding, decides)
             shown = {p.lineage for p in self._published.values()}
             with_id = [m for m in members if m in shown]
-            best = (
-                min(with_id, key=lambda m: (m not in together, self._ids.get(m, 0)))
-                if with_id
-                else max(members, key=lambda m: (marginals[m].existence, -m))
-            )
+            if with_id:
+                best = min(with_id, key=lambda m: (m not in together, self._ids.get(m, 0)))
+            else:
+                top = max(marginals[m].existence for m in members)
+                best = min(m for m in members if marginals[m].existence >= top - TIE)
             total = min(1.0, math.fsum(marginals[m].existence for m in members))
             for member in members:
                 del result[member]
@@ -1460,9 +1462,7 @@ class WorldModel:
             tentative=tentative,
         )
 
-    def confidence_of(
-        self, track: Track, time: float, book: BookView | None = None
-    ) -> Confidence:
+    def confidence_of(self, track: Track, time: float, book: BookView | None = None) -> Confidence:
         """An object's confidence (paper 004) at ``time``: :mod:`semwm.confidence`."""
         spec = self._knowledge.classes[track.cls]
         value = (self._book if book is None else book).at(track.lineage, time, spec)

@@ -14,7 +14,7 @@
 
 use crate::filters::small::{mahalanobis_squared, slogdet};
 use crate::mhf::existence::inside_probability;
-use crate::mhf::hypotheses::{fsum, KeyMap, KeySet};
+use crate::mhf::hypotheses::{fsum, KeyMap, KeySet, TIE};
 use crate::mhf::state::{Key, State, Version};
 use crate::mhf::tables::Tables;
 
@@ -314,12 +314,19 @@ fn same_objects(
             }
             best
         } else {
-            // max by (existence, -lineage): the first of the largest
+            // the likeliest; existences within TIE of the largest are a tie, which the
+            // oldest lineage (not rounding) decides
+            let top = members
+                .iter()
+                .map(|&i| marginals[candidates[i]].existence)
+                .fold(f64::NEG_INFINITY, f64::max);
             let mut best = members[0];
-            for &i in &members[1..] {
-                let (m, top) = (&marginals[candidates[i]], &marginals[candidates[best]]);
-                if (m.existence, -(m.lineage as i128)) > (top.existence, -(top.lineage as i128)) {
+            let mut best_lineage = u64::MAX;
+            for &i in members {
+                let m = &marginals[candidates[i]];
+                if m.existence >= top - TIE && m.lineage < best_lineage {
                     best = i;
+                    best_lineage = m.lineage;
                 }
             }
             best

@@ -3,6 +3,7 @@ ids, no underflow, atomic rejection of bad input, the reorder window, structural
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any
 
@@ -66,7 +67,7 @@ def test_probabilities_sum_to_one_after_every_ingest(items, ratio, max_h) -> Non
         # most probable first; hypotheses within TIE of each other are a tie, ordered
         # by their objects (semwm.mhf.prune.ties_in_order)
         tie = math.exp(TIE) * (1 + 1e-12)
-        assert all(b <= a * tie for a, b in zip(probs, probs[1:]))
+        assert all(b <= a * tie for a, b in itertools.pairwise(probs))
         if ratio > 0:
             assert min(probs) >= ratio * max(probs) * math.exp(-TIE) * (1 - 1e-12)
 
