@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from pydantic import TypeAdapter, ValidationError
@@ -98,6 +98,7 @@ def check(
     measurements: list[Measurement] = []
     classes, detectors = knowledge.classes, knowledge.detectors
     default_detector = knowledge.default_detector
+    pairs: dict[tuple[str, str], _Resolved] = {}  # once per (class, detector) a batch
     for index, det in enumerate(detections):
         detector = det.detector if det.detector is not None else default_detector
         if (  # the common case, nothing to report: no problem list, no closure
@@ -108,9 +109,12 @@ def check(
             and (det.sensor_position is None or len(det.sensor_position) == d)
         ):
             if not problems:
-                measurements.append(
-                    _measurement(det, first_seq + index, detector, knowledge, factory)
-                )
+                pair = pairs.get((det.cls, detector))
+                if pair is None:
+                    pair = pairs[det.cls, detector] = _resolved(
+                        det.cls, detector, knowledge, factory
+                    )
+                measurements.append(_measurement(det, first_seq + index, detector, pair))
             continue
         found: list[DetectionProblem] = []
 
@@ -142,33 +146,46 @@ def check(
         if found:
             problems.extend(found)
             continue
-        measurements.append(_measurement(det, first_seq + index, detector, knowledge, factory))
+        pair = _resolved(det.cls, detector, knowledge, factory)
+        if det.covariance is not None:
+            pair = pair._replace(R=np.asarray(det.covariance, dtype=float))
+        measurements.append(_measurement(det, first_seq + index, detector, pair))
     if problems:
         raise DetectionError(problems)
     return measurements
 
 
-def _measurement(
-    det: Detection, seq: int, detector: str, knowledge: Knowledge, factory: FilterFactory
-) -> Measurement:
+class _Resolved(NamedTuple):
+    """What a (class, detector) pair gives each of its detections."""
+
+    R: np.ndarray  # the measurement noise (shared, read-only)
+    trust_labels: bool  # paper 004: foreign-controlled objects are tracked from observation only
+    clutter_rate: float
+
+
+def _resolved(cls: str, detector: str, knowledge: Knowledge, factory: FilterFactory) -> _Resolved:
+    """The noise, label trust and clutter rate of a (class, detector) pair."""
+    return _Resolved(
+        factory.measurement_noise(cls, detector),
+        knowledge.classes[cls].trust_labels,
+        knowledge.detectors[detector].clutter_frequency,
+    )
+
+
+def _measurement(det: Detection, seq: int, detector: str, pair: _Resolved) -> Measurement:
     """A checked detection with its noise and clutter rate resolved."""
     return Measurement(
-        seq=seq,
-        time=det.time,
-        cls=det.cls,
-        z=np.asarray(det.position, dtype=float),
-        R=np.asarray(det.covariance, dtype=float)
-        if det.covariance is not None
-        else factory.measurement_noise(det.cls, detector),
-        detector=detector,
-        source=det.source,
-        # paper 004: foreign-controlled objects are tracked from observation only
-        label=det.label if knowledge.classes[det.cls].trust_labels else None,
-        clutter_rate=knowledge.detectors[detector].clutter_frequency,
-        sensor=None
-        if det.sensor_position is None
-        else np.asarray(det.sensor_position, dtype=float),
-        time_std=det.time_std or 0.0,
+        seq,
+        det.time,
+        det.cls,
+        np.asarray(det.position, dtype=float),
+        pair.R,
+        detector,
+        det.source,
+        det.label if pair.trust_labels else None,
+        pair.clutter_rate,
+        None if det.sensor_position is None else np.asarray(det.sensor_position, dtype=float),
+        det.time_std or 0.0,
     )
 
 

@@ -941,9 +941,20 @@ class WorldModel:
         close (Mahalanobis) and of compatible classes; otherwise it gets the next id.
         Ids are given only to published objects, so discarded branches burn none.
         """
+        current = self._current()
+        if (
+            not self._lost
+            and self._ids.keys() <= current.keys()
+            and all(pub.lineage in current for pub in self._published.values())
+        ):
+            self._publish_unchanged(current)
+        else:
+            self._publish_changed(current)
+
+    def _publish_changed(self, current: Mapping[int, Track | VersionRef]) -> None:
+        """:meth:`_publish` in general: ``current`` the published world now."""
         state = self._state
         dim = self._knowledge.world.dimension
-        current = self._current()
         alive = self._lineages(state)
         now = state.time if state.time is not None else 0.0
         memory = self._knowledge.world.id_memory
@@ -983,6 +994,21 @@ class WorldModel:
         self._published = {
             self._ids[lineage]: _Published(track) for lineage, track in current.items()
         }
+
+    def _publish_unchanged(self, current: Mapping[int, Track | VersionRef]) -> None:
+        """:meth:`_publish` when no published object left and no id waits for its object
+        (the common scan): what it gives then, without reading every lineage the state
+        holds. Every lineage with an id is shown (so alive), and new ones take the next
+        ids in the published world's order (no lost id to hand over)."""
+        ids = self._ids
+        fresh = [lineage for lineage in current if lineage not in ids]
+        if fresh:
+            ids = dict(ids)  # a new table: one a query cached must not change
+            for lineage in fresh:
+                ids[lineage] = self._next_id
+                self._next_id += 1
+            self._ids = ids
+        self._published = {ids[lineage]: _Published(track) for lineage, track in current.items()}
 
     def _may_return(self, pub: _Published) -> bool:
         """Whether a lost object may come back under its id (``mht``): not when it was
