@@ -6,6 +6,7 @@ counterpart in :mod:`semwm.filters.batched` and :mod:`semwm.filters.small`, and 
 definite) as the Python engine does.
 """
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -201,5 +202,30 @@ class Engine:
         source: str | None = None,
     ) -> Book: ...
     def current(
-        self, state: State, shown: list[int], ids: list[tuple[int, int]]
-    ) -> list[tuple[int, int, int, int]]: ...
+        self, state: Any, published: Mapping[int, Any], ids: Mapping[int, int]
+    ) -> dict[int, VersionRef]: ...
+    def publish(
+        self,
+        state: Any,
+        published: Mapping[int, Any],
+        ids: Mapping[int, int],
+        lost: bool,
+        next_id: int,
+    ) -> tuple[
+        dict[int, VersionRef], tuple[dict[int, int], dict[int, VersionRef], int] | None
+    ]: ...
+
+class VersionRef:
+    """A version of a core state (``state``: the ``CoreState`` holding it)."""
+
+    def __init__(self, lineage: int, cls: str, key: int, serial: int, state: Any) -> None: ...
+    @property
+    def lineage(self) -> int: ...
+    @property
+    def cls(self) -> str: ...
+    @property
+    def key(self) -> int: ...
+    @property
+    def serial(self) -> int: ...
+    @property
+    def state(self) -> Any: ...

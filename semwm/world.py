@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from operator import attrgetter
-from typing import Any, Literal, NamedTuple
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -53,7 +53,7 @@ from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf import nearby
 from semwm.mhf.actions import Kick, apply_kick
-from semwm.mhf.core_engine import CoreState, VersionRef, as_python, as_python_book, track_of
+from semwm.mhf.core_engine import CoreState, as_python, as_python_book, track_of
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted
@@ -77,6 +77,9 @@ from semwm.world_types import (
     WorldObject,
     WorldState,
 )
+
+if TYPE_CHECKING:
+    from semwm._core import VersionRef
 
 ScanKey = tuple[float, str]
 _HANDOVER_GATE = 13.8  # chi-square 99.9 % for 2 degrees of freedom; ids move only this close
@@ -149,7 +152,7 @@ class _Held:
     view: SensorView | None = None
 
 
-_Tables = tuple[dict[int, int], int, dict[int, "_Published"], dict[int, "_Published"]]
+_Tables = tuple[dict[int, int], int, dict[int, "Track | VersionRef"], dict[int, "_Lost"]]
 """The id tables: lineage -> id, the next id, the published and the lost objects."""
 _Link = tuple[_Held, StateView, BookView, _Tables]
 
@@ -167,12 +170,13 @@ class _Tentative:
     chain: tuple[_Link, ...]
 
 
-class _Published(NamedTuple):
-    """An object as last published: its version (positions are computed only if its id
-    has to be handed over). A named tuple: one is made per published object per scan."""
+class _Lost(NamedTuple):
+    """A published object that left the published world, its id waiting for it: its
+    version as last published (positions are computed only if its id has to be handed
+    over) and when it left."""
 
     track: Track | VersionRef  # the Rust engine's: made into a Track only where needed
-    lost_at: float | None = None  # when it left the published world
+    lost_at: float
 
     @property
     def lineage(self) -> int:
@@ -318,8 +322,10 @@ class WorldModel:
         self._seq = 0
         self._ids: dict[int, int] = {}
         self._next_id = 1
-        self._published: dict[int, _Published] = {}
-        self._lost: dict[int, _Published] = {}
+        # id -> the version published (the Rust engine's: a VersionRef, made into a
+        # Track only where needed)
+        self._published: dict[int, Track | VersionRef] = {}
+        self._lost: dict[int, _Lost] = {}
         self._pending: dict[ScanKey, _Held] = {}  # held scans (values immutable)
         self._newest: float | None = None  # newest accepted time, pending included
         self._earliest: float | None = None  # earliest accepted time: nothing before it
@@ -437,7 +443,7 @@ class WorldModel:
             existence = {k: state.existence.get(k, 1.0) for k in referenced}
             self._state = replace(state, clusters=clusters, tracks=tracks, existence=existence)
         self._published = {
-            i: p for i, p in self._published.items() if p.track.cls in knowledge.classes
+            i: p for i, p in self._published.items() if p.cls in knowledge.classes
         }
         self._lost = {i: p for i, p in self._lost.items() if p.track.cls in knowledge.classes}
         if gone:
@@ -941,11 +947,24 @@ class WorldModel:
         close (Mahalanobis) and of compatible classes; otherwise it gets the next id.
         Ids are given only to published objects, so discarded branches burn none.
         """
+        core = self._mhf._core
+        state = self._state
+        if core is not None and isinstance(state, CoreState) and state.engine is core:
+            # the core gives the common case itself (core/src/python/engine.rs)
+            shown, unchanged = core.publish(
+                state, self._published, self._ids, bool(self._lost), self._next_id
+            )
+            if unchanged is None:
+                self._publish_changed(shown)
+            else:
+                self._ids, published, self._next_id = unchanged
+                self._published = cast("dict[int, Track | VersionRef]", published)
+            return
         current = self._current()
         if (
             not self._lost
             and self._ids.keys() <= current.keys()
-            and all(pub.lineage in current for pub in self._published.values())
+            and all(track.lineage in current for track in self._published.values())
         ):
             self._publish_unchanged(current)
         else:
@@ -958,14 +977,14 @@ class WorldModel:
         alive = self._lineages(state)
         now = state.time if state.time is not None else 0.0
         memory = self._knowledge.world.id_memory
-        for object_id, pub in list(self._published.items()):
-            if pub.lineage not in current:
-                self._lost[object_id] = pub._replace(lost_at=now)
+        for object_id, track in list(self._published.items()):
+            if track.lineage not in current:
+                self._lost[object_id] = _Lost(track, now)
         if self._mhf.mht:  # ids wait id_memory seconds for their object to come back
             self._lost = {
                 i: p
                 for i, p in self._lost.items()
-                if p.lost_at is not None and now - p.lost_at <= memory and self._may_return(p)
+                if now - p.lost_at <= memory and self._may_return(p)
             }
         else:  # paper: an id waits while its lineage lives (the MAP may switch back)
             self._lost = {
@@ -991,9 +1010,7 @@ class WorldModel:
                 self._ids[track.lineage] = self._next_id
                 self._next_id += 1
         self._ids = {lineage: i for lineage, i in self._ids.items() if lineage in alive}
-        self._published = {
-            self._ids[lineage]: _Published(track) for lineage, track in current.items()
-        }
+        self._published = {self._ids[lineage]: track for lineage, track in current.items()}
 
     def _publish_unchanged(self, current: Mapping[int, Track | VersionRef]) -> None:
         """:meth:`_publish` when no published object left and no id waits for its object
@@ -1008,9 +1025,9 @@ class WorldModel:
                 ids[lineage] = self._next_id
                 self._next_id += 1
             self._ids = ids
-        self._published = {ids[lineage]: _Published(track) for lineage, track in current.items()}
+        self._published = {ids[lineage]: track for lineage, track in current.items()}
 
-    def _may_return(self, pub: _Published) -> bool:
+    def _may_return(self, pub: _Lost) -> bool:
         """Whether a lost object may come back under its id (``mht``): not when it was
         lost out of the region or next to a target it leaves by (a disappearance
         relation: it left, and someone coming in there is someone else)."""
@@ -1078,8 +1095,7 @@ class WorldModel:
         state = self._state
         core = self._mhf._core
         if core is not None and isinstance(state, CoreState) and state.engine is core:
-            shown = [pub.lineage for pub in self._published.values()]
-            return core.current(state, shown, self._ids)
+            return core.current(state, self._published, self._ids)
         if not self._mhf.mht:
             tracks = state.tracks
             return {tracks[k].lineage: tracks[k] for k in sorted(state.best.tracks)}
@@ -1238,7 +1254,7 @@ class WorldModel:
             # version of the most probable hypothesis first (not one that is there only
             # by another hypothesis's account), else the likeliest (existences within
             # TIE of the largest are a tie: the oldest lineage, not rounding, decides)
-            shown = {p.lineage for p in self._published.values()}
+            shown = {track.lineage for track in self._published.values()}
             with_id = [m for m in members if m in shown]
             if with_id:
                 best = min(with_id, key=lambda m: (m not in together, self._ids.get(m, 0)))

@@ -190,10 +190,11 @@ def _listed(position: tuple[float, ...] | None) -> list[float] | None:
     return None if position is None else list(position)
 
 
-class VersionRef(NamedTuple):
+class _VersionRefSpec(NamedTuple):
     """A version of a core state, named without making its Python value (the published
     world of every scan names every object shown; their values are made only where
-    needed: :func:`track_of`)."""
+    needed: :func:`track_of`). The core makes them (``semwm._core.VersionRef``, these
+    fields); this one stands in where the core is not built, and then none is made."""
 
     lineage: int
     cls: str
@@ -202,11 +203,27 @@ class VersionRef(NamedTuple):
     state: CoreState
 
 
+if TYPE_CHECKING:
+    from semwm._core import VersionRef
+else:
+    try:
+        from semwm._core import VersionRef
+    except ImportError:  # no core, no core states: no VersionRef is ever made
+        VersionRef = _VersionRefSpec
+
+
 def track_of(version: Track | VersionRef) -> Track:
     """The version's Python value."""
     if isinstance(version, VersionRef):
-        return version.state.engine.resolve(version)
+        state: CoreState = version.state
+        return state.engine.resolve(version)
     return version
+
+
+def unpickled_track(track: Track) -> Track:
+    """What a pickled ``VersionRef`` becomes: its version's Python value (the core
+    state it names lives in this process only; ``semwm._core.VersionRef.__reduce__``)."""
+    return track
 
 
 class _Made:
@@ -495,17 +512,26 @@ class CoreEngine:
         )
 
     def current(
-        self, state: CoreState, shown: list[int], ids: Mapping[int, int]
+        self, state: CoreState, published: Mapping[int, Any], ids: Mapping[int, int]
     ) -> dict[int, VersionRef]:
         """``WorldModel._current`` of ``state``: lineage -> the version shown
-        (``core/src/world.rs``); ``shown`` the lineages published now, ``ids`` theirs."""
-        names = self.names
-        return {
-            lineage: VersionRef(lineage, names[cls], key, serial, state)
-            for lineage, key, cls, serial in self.engine.current(
-                state.core, shown, list(ids.items())
-            )
-        }
+        (``core/src/world.rs``); ``published`` the objects shown now by id, ``ids``
+        theirs (lineage -> id)."""
+        return self.engine.current(state, published, ids)
+
+    def publish(
+        self,
+        state: CoreState,
+        published: Mapping[int, Any],
+        ids: Mapping[int, int],
+        lost: bool,
+        next_id: int,
+    ) -> tuple[dict[int, VersionRef], tuple[dict[int, int], dict[int, VersionRef], int] | None]:
+        """``WorldModel._publish`` of ``state`` with its common case in the core:
+        ``(current, unchanged)``; ``unchanged`` is what ``_publish_unchanged`` makes
+        (``ids``, ``published``, ``next_id``) when it applies, else ``None`` and the
+        caller publishes ``current`` in general (``lost``: an id waits for its object)."""
+        return self.engine.publish(state, published, ids, lost, next_id)
 
     def resolve(self, ref: VersionRef) -> Track:
         """The version ``ref`` names as a Python value."""

@@ -9,10 +9,12 @@
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
-use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods,
+};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyDict, PyList, PyString, PyTuple};
 
 use crate::error::KernelError;
 use crate::mhf::existence::View;
@@ -256,27 +258,163 @@ impl PyBook {
     }
 }
 
-/// A `Measurement` named tuple as it is read.
-type MeasurementTuple<'py> = (
-    u64,
-    f64,
-    String,
-    PyReadonlyArray1<'py, f64>,
-    PyReadonlyArray2<'py, f64>,
-    String,
-    Option<String>,
-    Option<String>,
-    f64,
-    Option<PyReadonlyArray1<'py, f64>>,
-    f64,
-);
-
 /// The filter of one knowledge base, its whole scan in the core.
 #[pyclass(frozen, name = "Engine", module = "semwm._core")]
 pub struct PyEngine {
     filter: Arc<Filter>,
     classes: HashMap<String, usize>,
     detectors: HashMap<String, usize>,
+    /// the class names as Python strings, by index (each `VersionRef` shares its class's)
+    names: Vec<Py<PyString>>,
+}
+
+/// A version of a core state, named without making its Python value
+/// (`semwm.mhf.core_engine.VersionRef`): the published world of every scan names every
+/// object shown, so one is made per object and scan, here rather than in Python.
+/// `state` is the `CoreState` (Python) that holds the version.
+#[pyclass(frozen, get_all, name = "VersionRef", module = "semwm._core")]
+pub struct PyVersionRef {
+    lineage: u64,
+    cls: Py<PyString>,
+    key: u64,
+    serial: u64,
+    state: Py<PyAny>,
+}
+
+#[pymethods]
+impl PyVersionRef {
+    #[new]
+    fn new(lineage: u64, cls: Py<PyString>, key: u64, serial: u64, state: Py<PyAny>) -> Self {
+        PyVersionRef {
+            lineage,
+            cls,
+            key,
+            serial,
+            state,
+        }
+    }
+
+    /// Pickled as the version's Python value, a `Track` (a snapshot holds the published
+    /// world; the core state it names lives in this process only, as `CoreState`
+    /// pickles as the specification's `MHFState`): `semwm.mhf.core_engine.track_of`.
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyAny>,))> {
+        let module = slf.py().import("semwm.mhf.core_engine")?;
+        let track = module.getattr("track_of")?.call1((slf,))?;
+        Ok((module.getattr("unpickled_track")?, (track,)))
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> String {
+        format!(
+            "VersionRef(lineage={}, cls={:?}, key={}, serial={})",
+            self.lineage,
+            self.cls.bind(py).to_string(),
+            self.key,
+            self.serial
+        )
+    }
+}
+
+/// The lineage of a published object: a `VersionRef`'s, or any value's `lineage`.
+fn lineage_of(value: &Bound<'_, PyAny>) -> PyResult<u64> {
+    match value.cast::<PyVersionRef>() {
+        Ok(reference) => Ok(reference.get().lineage),
+        Err(_) => value.getattr("lineage")?.extract(),
+    }
+}
+
+impl PyEngine {
+    /// `world::current` of `state` (a `CoreState`) as `{lineage: VersionRef}`, in the
+    /// specification's order; `published` the objects shown now by id, `ids` theirs.
+    fn current_refs<'py>(
+        &self,
+        state: &Bound<'py, PyAny>,
+        published: &Bound<'py, PyDict>,
+        ids: &KeyMap<u64, i64>,
+    ) -> PyResult<(Bound<'py, PyDict>, Vec<u64>)> {
+        let py = state.py();
+        let core: PyRef<'_, PyState> = state.getattr("core")?.extract()?;
+        let mut shown: KeySet<u64> = KeySet::default();
+        for value in published.values().iter() {
+            shown.insert(lineage_of(&value)?);
+        }
+        let filter = self.filter.clone();
+        let held = core.state.clone();
+        let rows = run(py, "Engine.current", move || {
+            let pairs = crate::world::current(&held, &filter.tables, &shown, ids);
+            Ok(pairs
+                .into_iter()
+                .map(|(lineage, key)| {
+                    let entry = &held.tracks[&key];
+                    (lineage, key, entry.version.cls, entry.serial)
+                })
+                .collect::<Vec<_>>())
+        })?;
+        let current = PyDict::new(py);
+        let mut order = Vec::with_capacity(rows.len());
+        for (lineage, key, cls, serial) in rows {
+            let name = self
+                .names
+                .get(cls)
+                .ok_or_else(|| PyValueError::new_err(format!("Engine.current: no class {cls}")))?;
+            let reference = PyVersionRef {
+                lineage,
+                cls: name.clone_ref(py),
+                key,
+                serial,
+                state: state.clone().unbind(),
+            };
+            current.set_item(lineage, Bound::new(py, reference)?)?;
+            order.push(lineage);
+        }
+        Ok((current, order))
+    }
+}
+
+/// A float64 array's values in row-major order (copied: no borrow is held, as the
+/// values are read at once).
+fn float_values(array: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
+    fn copied(error: impl std::fmt::Display) -> PyErr {
+        PyValueError::new_err(format!("array not readable: {error}"))
+    }
+    if let Ok(vector) = array.cast::<PyArray1<f64>>() {
+        return if vector.is_c_contiguous() {
+            vector.to_vec().map_err(copied)
+        } else {
+            Ok(vector.to_owned_array().iter().copied().collect())
+        };
+    }
+    if let Ok(matrix) = array.cast::<PyArray2<f64>>() {
+        return if matrix.is_c_contiguous() {
+            matrix.to_vec().map_err(copied)
+        } else {
+            Ok(matrix.to_owned_array().iter().copied().collect())
+        };
+    }
+    match array.cast::<PyUntypedArray>() {
+        Ok(other) => Err(PyValueError::new_err(format!(
+            "expected a float64 array of 1 or 2 dimensions, got {} of {} dimensions",
+            other.dtype(),
+            other.ndim()
+        ))),
+        Err(_) => Err(PyValueError::new_err(format!(
+            "expected a float64 array, got {}",
+            array.get_type().name()?
+        ))),
+    }
+}
+
+/// `WorldModel._publish_unchanged`'s tables: `(ids, published, next_id)`.
+type Unchanged<'py> = (Bound<'py, PyDict>, Bound<'py, PyDict>, i64);
+
+fn id_table(ids: &Bound<'_, PyDict>) -> PyResult<KeyMap<u64, i64>> {
+    let mut table: KeyMap<u64, i64> = KeyMap::default();
+    table.reserve(ids.len());
+    for (lineage, id) in ids.iter() {
+        table.insert(lineage.extract()?, id.extract()?);
+    }
+    Ok(table)
 }
 
 #[pymethods]
@@ -284,6 +422,7 @@ impl PyEngine {
     /// The engine of `tables` (a dict: `semwm/mhf/core_engine.py: tables`).
     #[new]
     fn new(tables: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let tables_py = tables;
         let tables = tables_from(tables)?;
         let filter = Filter::new(tables).map_err(to_py_err)?;
         let classes = filter
@@ -300,37 +439,85 @@ impl PyEngine {
             .enumerate()
             .map(|(i, d)| (d.name.clone(), i))
             .collect();
+        let names = filter
+            .tables
+            .classes
+            .iter()
+            .map(|c| PyString::new(tables_py.py(), &c.name).unbind())
+            .collect();
         Ok(PyEngine {
             filter: Arc::new(filter),
             classes,
             detectors,
+            names,
         })
     }
 
-    /// The published world of `state` (`WorldModel._current`): `(lineage, key, class
-    /// index, serial)` of each object shown, in the specification's order; `shown` the
-    /// lineages published now, `ids` their ids.
-    fn current(
+    /// The published world of `state`, a `CoreState` (`WorldModel._current`):
+    /// `{lineage: VersionRef}` of each object shown, in the specification's order;
+    /// `published` the objects shown now by id (`WorldModel._published`), `ids` their
+    /// ids (`WorldModel._ids`, lineage -> id).
+    fn current<'py>(
         &self,
-        py: Python<'_>,
-        state: &PyState,
-        shown: Vec<u64>,
-        ids: Vec<(u64, i64)>,
-    ) -> PyResult<Vec<(u64, u64, usize, u64)>> {
-        let filter = self.filter.clone();
-        let state = state.state.clone();
-        run(py, "Engine.current", move || {
-            let shown: KeySet<u64> = shown.into_iter().collect();
-            let ids: KeyMap<u64, i64> = ids.into_iter().collect();
-            let pairs = crate::world::current(&state, &filter.tables, &shown, &ids);
-            Ok(pairs
-                .into_iter()
-                .map(|(lineage, key)| {
-                    let entry = &state.tracks[&key];
-                    (lineage, key, entry.version.cls, entry.serial)
-                })
-                .collect())
-        })
+        state: &Bound<'py, PyAny>,
+        published: &Bound<'py, PyDict>,
+        ids: &Bound<'py, PyDict>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        Ok(self.current_refs(state, published, &id_table(ids)?)?.0)
+    }
+
+    /// `WorldModel._publish` of `state` (a `CoreState`) with its common case here:
+    /// `(current, unchanged)`, `current` as `Engine.current` gives it; `unchanged` is
+    /// `None` unless no published object left the world (`lost` is empty, every lineage
+    /// with an id and every published one is in `current`), and then `(ids, published,
+    /// next_id)` as `WorldModel._publish_unchanged` makes them: new lineages take the
+    /// next ids in `current`'s order (`ids` itself when there are none).
+    fn publish<'py>(
+        &self,
+        state: &Bound<'py, PyAny>,
+        published: &Bound<'py, PyDict>,
+        ids: &Bound<'py, PyDict>,
+        lost: bool,
+        next_id: i64,
+    ) -> PyResult<(Bound<'py, PyDict>, Option<Unchanged<'py>>)> {
+        let py = state.py();
+        let table = id_table(ids)?;
+        let (current, order) = self.current_refs(state, published, &table)?;
+        if lost {
+            return Ok((current, None));
+        }
+        let showing: KeySet<u64> = order.iter().copied().collect();
+        if table.keys().any(|lineage| !showing.contains(lineage)) {
+            return Ok((current, None));
+        }
+        for value in published.values().iter() {
+            if !showing.contains(&lineage_of(&value)?) {
+                return Ok((current, None));
+            }
+        }
+        let fresh: Vec<u64> = order
+            .iter()
+            .copied()
+            .filter(|lineage| !table.contains_key(lineage))
+            .collect();
+        let (ids, mut table, mut next_id) = (ids.clone(), table, next_id);
+        let ids = if fresh.is_empty() {
+            ids
+        } else {
+            let copied = ids.copy()?; // a new table: one a query cached must not change
+            for lineage in fresh {
+                copied.set_item(lineage, next_id)?;
+                table.insert(lineage, next_id);
+                next_id += 1;
+            }
+            copied
+        };
+        let shown = PyDict::new(py);
+        for (lineage, reference) in current.iter() {
+            let lineage: u64 = lineage.extract()?;
+            shown.set_item(table[&lineage], reference)?;
+        }
+        Ok((current, Some((ids, shown, next_id))))
     }
 
     /// The confidence book after one scan (`semwm.confidence.advance`; `state` is the
@@ -389,28 +576,82 @@ impl PyEngine {
         let tables = &self.filter.tables;
         let d = tables.dim;
         let mut scan = Vec::with_capacity(measurements.len());
+        // a batch's detections share their class's noise array and usually their source:
+        // read each once (by identity; names by value)
+        let mut last_r: Option<(Bound<'_, PyAny>, Vec<f64>)> = None;
+        let mut last_source: Option<Name> = None;
         for (j, item) in measurements.iter().enumerate() {
-            let m: MeasurementTuple<'_> = item.extract().map_err(|error| {
+            let not_one = |error: PyErr| {
                 PyValueError::new_err(format!("measurements[{j}]: not a Measurement: {error}"))
-            })?;
-            let (seq, time, cls, z, r, detector, source, label, clutter_rate, sensor, time_std) = m;
-            let cls = *self.classes.get(cls.as_str()).ok_or_else(|| {
+            };
+            let fields = item.cast::<PyTuple>().map_err(|e| not_one(e.into()))?;
+            if fields.len() != 11 {
+                return Err(PyValueError::new_err(format!(
+                    "measurements[{j}]: not a Measurement: {} fields, not 11",
+                    fields.len()
+                )));
+            }
+            let field = |i: usize| fields.get_item(i);
+            let seq: u64 = field(0)?.extract().map_err(not_one)?;
+            let time: f64 = field(1)?.extract().map_err(not_one)?;
+            let cls = field(2)?;
+            let cls = cls
+                .cast::<PyString>()
+                .map_err(|e| not_one(e.into()))?
+                .to_str()?;
+            let cls = *self.classes.get(cls).ok_or_else(|| {
                 PyValueError::new_err(format!("measurements[{j}]: unknown class {cls:?}"))
             })?;
-            let detector = *self.detectors.get(detector.as_str()).ok_or_else(|| {
+            let detector = field(5)?;
+            let detector = detector
+                .cast::<PyString>()
+                .map_err(|e| not_one(e.into()))?
+                .to_str()?;
+            let detector = *self.detectors.get(detector).ok_or_else(|| {
                 PyValueError::new_err(format!("measurements[{j}]: unknown detector {detector:?}"))
             })?;
-            let z = z
-                .as_slice()
-                .map(<[f64]>::to_vec)
-                .unwrap_or_else(|_| z.as_array().to_vec());
-            let r: Vec<f64> = r.as_array().iter().copied().collect();
+            let z = float_values(&field(3)?).map_err(not_one)?;
+            let r_object = field(4)?;
+            let r = match &last_r {
+                Some((object, values)) if object.is(&r_object) => values.clone(),
+                _ => {
+                    let values = float_values(&r_object).map_err(not_one)?;
+                    last_r = Some((r_object, values.clone()));
+                    values
+                }
+            };
             if z.len() != d || r.len() != d * d {
                 return Err(PyValueError::new_err(format!(
                     "measurements[{j}]: expected z of {d} and R of {} values",
                     d * d
                 )));
             }
+            let source = field(6)?;
+            let source = if source.is_none() {
+                ""
+            } else {
+                source
+                    .cast::<PyString>()
+                    .map_err(|e| not_one(e.into()))?
+                    .to_str()?
+            };
+            let source = match &last_source {
+                Some(name) if &**name == source => name.clone(),
+                _ => {
+                    let name = Name::from(source);
+                    last_source = Some(name.clone());
+                    name
+                }
+            };
+            let label: Option<String> = field(7)?.extract().map_err(not_one)?;
+            let clutter_rate: f64 = field(8)?.extract().map_err(not_one)?;
+            let sensor = field(9)?;
+            let sensor = if sensor.is_none() {
+                None
+            } else {
+                Some(float_values(&sensor).map_err(not_one)?)
+            };
+            let time_std: f64 = field(10)?.extract().map_err(not_one)?;
             scan.push(Measurement {
                 seq,
                 time,
@@ -418,10 +659,10 @@ impl PyEngine {
                 z,
                 r,
                 detector,
-                source: Name::from(source.unwrap_or_default()),
+                source,
                 label: label.map(Name::from),
                 clutter_rate,
-                sensor: sensor.map(|s| s.as_array().to_vec()),
+                sensor,
                 time_std,
             });
         }

@@ -971,5 +971,6 @@ fn semwm_core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<engine::PyEngine>()?;
     module.add_class::<engine::PyState>()?;
     module.add_class::<engine::PyBook>()?;
+    module.add_class::<engine::PyVersionRef>()?;
     Ok(())
 }
