@@ -192,6 +192,14 @@ class Engine:
     def process_measurements(
         self, state: State, measurements: list[Any], view: tuple[object, ...] | None = None
     ) -> State: ...
+    def process_and_advance(
+        self,
+        state: State,
+        book: Book,
+        measurements: list[Any],
+        view: tuple[object, ...] | None = None,
+        source: str | None = None,
+    ) -> tuple[State, Book]: ...
     def class_names(self) -> list[str]: ...
     def advance(
         self,

@@ -203,6 +203,10 @@ def _checked_hold(hold: float) -> float:
     return float(hold)
 
 
+def _within(value: float, low: float, high: float) -> bool:
+    return low <= value <= high
+
+
 def _view_key(view: SensorView) -> ScanKey:
     return (view.time, view.source or "")
 
@@ -497,15 +501,7 @@ class WorldModel:
         parsed = parse(batch)
         measurements = check(parsed, self._knowledge, self._mhf.factory, self._seq)
         view = self._view(sensor, measurements) if sensor is not None else None
-        used: list[Measurement] = []
-        skipped: list[IgnoredDetection] = []
-        bounds = self._region_bounds
-        for index, (m, d) in enumerate(zip(measurements, parsed, strict=True)):
-            why = self._ignored(d, m, index, bounds)
-            if why is None:
-                used.append(m)
-            else:
-                skipped.append(why)
+        used, skipped = self._placed(parsed, measurements)
         ignored = len(skipped)
         latest = self._state.time
         times = [m.time for m in used] + ([view.time] if view is not None else [])
@@ -534,6 +530,35 @@ class WorldModel:
             ignored=ignored,
             ignored_detections=tuple(skipped),
         )
+
+    def _placed(
+        self, parsed: list[Detection], measurements: list[Measurement]
+    ) -> tuple[list[Measurement], list[IgnoredDetection]]:
+        """The batch's measurements used, and why each other detection is not
+        (:meth:`_ignored`). A detection with the class's noise and no sensor position
+        inside the region's bounds for its (class, detector) is used without a call per
+        detection: the common case, decided as :meth:`_ignored` decides it."""
+        used: list[Measurement] = []
+        skipped: list[IgnoredDetection] = []
+        bounds = self._region_bounds
+        plain = self._knowledge.world.region is None
+        for index, (m, d) in enumerate(zip(measurements, parsed, strict=True)):
+            if d.sensor_position is None and d.covariance is None:
+                if plain:
+                    used.append(m)
+                    continue
+                limits = bounds.get((m.cls, m.detector))
+                if limits is not None:
+                    low, high = limits
+                    if all(map(_within, d.position, low, high)):
+                        used.append(m)
+                        continue
+            why = self._ignored(d, m, index, bounds)
+            if why is None:
+                used.append(m)
+            else:
+                skipped.append(why)
+        return used, skipped
 
     def _ignored(
         self,
@@ -925,9 +950,11 @@ class WorldModel:
             if held.view is view and _same(held.measurements, measurements):
                 self._tentative = _Tentative(after, after_book, tables, cache.chain[1:])
                 return after, after_book
+        core = self._mhf._core
+        if core is not None and self._mhf.mht and (measurements or view is not None):
+            return core.process_and_advance(state, book, measurements, view)  # one call
         state = self._mhf.process_scan(state, measurements, view)
         if self._mhf.mht:
-            core = self._mhf._core
             if core is not None and isinstance(state, CoreState) and state.engine is core:
                 book = core.advance(book, state, measurements, view)
             else:

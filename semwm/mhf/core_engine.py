@@ -398,8 +398,31 @@ class CoreEngine:
     ) -> CoreState:
         core = self.to_core(state)
         view_row = None if view is None else self._view(view)
-        after = self.engine.process_measurements(core, list(measurements), view_row)
+        after = self.engine.process_measurements(core, self.scan_rows(measurements), view_row)
         return CoreState(after, self)
+
+    def scan_rows(self, measurements: Sequence[Measurement]) -> list[Measurement]:
+        """The rows a scan hands the core: its measurements as they are (one place, so
+        that a test can alter what the core sees)."""
+        return list(measurements)
+
+    def process_and_advance(
+        self,
+        state: StateView,
+        book: BookView,
+        measurements: Sequence[Measurement],
+        view: SensorView | None,
+    ) -> tuple[CoreState, CoreBook]:
+        """:meth:`process_scan`, then :meth:`advance` over the state after it, in one
+        call to the core (``WorldModel._step`` with the ``mht`` model)."""
+        after, after_book = self.engine.process_and_advance(
+            self.to_core(state),
+            self._core_book(book),
+            self.scan_rows(measurements),
+            None if view is None else self._view(view),
+            None if view is None else view.source,
+        )
+        return CoreState(after, self), CoreBook(after_book)
 
     def _view(self, view: SensorView) -> tuple[Any, ...]:
         return (
@@ -490,16 +513,7 @@ class CoreEngine:
         view: SensorView | None,
     ) -> CoreBook:
         """:func:`semwm.confidence.advance` in the core."""
-        if isinstance(book, CoreBook):
-            core_book = book.core
-        elif isinstance(book, ConfidenceBook):
-            core_book = self._core.Book.of(
-                [(lineage, value, since) for lineage, (value, since) in book.values.items()],
-                [(source, x, y) for source, (x, y) in book.poses.items()],
-                list(book.scans.items()),
-            )
-        else:
-            raise TypeError(f"not a confidence book: {type(book).__name__}")
+        core_book = self._core_book(book)
         detectors = [self.detectors[m.detector] for m in measurements]
         return CoreBook(
             self.engine.advance(
@@ -510,6 +524,18 @@ class CoreEngine:
                 None if view is None else view.source,
             )
         )
+
+    def _core_book(self, book: BookView) -> _core.Book:
+        """The core's confidence book of ``book``."""
+        if isinstance(book, CoreBook):
+            return book.core
+        if isinstance(book, ConfidenceBook):
+            return self._core.Book.of(
+                [(lineage, value, since) for lineage, (value, since) in book.values.items()],
+                [(source, x, y) for source, (x, y) in book.poses.items()],
+                list(book.scans.items()),
+            )
+        raise TypeError(f"not a confidence book: {type(book).__name__}")
 
     def current(
         self, state: CoreState, published: Mapping[int, Any], ids: Mapping[int, int]

@@ -41,24 +41,19 @@ def test_a_run_in_step_is_equal_and_written() -> None:
 
 def test_a_nudged_rust_engine_shows(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every measurement 1e-6 m off on the Rust side: the largest difference says so."""
-    process = core_engine.CoreEngine.process_scan
+    def nudged(self: Any, measurements: Any) -> Any:
+        return [m._replace(z=m.z + 1e-6 * (np.arange(m.z.size) == 0)) for m in measurements]
 
-    def nudged(self: Any, state: Any, measurements: Any, view: Any) -> Any:
-        moved = [m._replace(z=m.z + 1e-6 * (np.arange(m.z.size) == 0)) for m in measurements]
-        return process(self, state, moved, view)
-
-    monkeypatch.setattr(core_engine.CoreEngine, "process_scan", nudged)
+    monkeypatch.setattr(core_engine.CoreEngine, "scan_rows", nudged)
     tally = bench_engines.parity_run(SIM1, 0)
     assert 1e-7 < tally.largest < 1e-5
 
 
 def test_a_rust_engine_that_drops_a_detection_shows(monkeypatch: pytest.MonkeyPatch) -> None:
-    process = core_engine.CoreEngine.process_scan
+    def dropping(self: Any, measurements: Any) -> Any:
+        return list(measurements)[:-1] or list(measurements)
 
-    def dropping(self: Any, state: Any, measurements: Any, view: Any) -> Any:
-        return process(self, state, list(measurements)[:-1] or measurements, view)
-
-    monkeypatch.setattr(core_engine.CoreEngine, "process_scan", dropping)
+    monkeypatch.setattr(core_engine.CoreEngine, "scan_rows", dropping)
     doc = bench_engines.run_parity(1, cases=(SIM1,), require_all=False)
     (row,) = doc["cases"]
     assert not row["equal"] and row["differing"] > 0 and row["first"].startswith("seed 0, call")

@@ -325,6 +325,105 @@ fn lineage_of(value: &Bound<'_, PyAny>) -> PyResult<u64> {
 }
 
 impl PyEngine {
+    /// A scan's `Measurement` named tuples as the core's measurements (see
+    /// `process_measurements`).
+    fn read_measurements(&self, measurements: &Bound<'_, PyList>) -> PyResult<Vec<Measurement>> {
+        let tables = &self.filter.tables;
+        let d = tables.dim;
+        let mut scan = Vec::with_capacity(measurements.len());
+        // a batch's detections share their class's noise array and usually their source:
+        // read each once (by identity; names by value)
+        let mut last_r: Option<(Bound<'_, PyAny>, Vec<f64>)> = None;
+        let mut last_source: Option<Name> = None;
+        for (j, item) in measurements.iter().enumerate() {
+            let not_one = |error: PyErr| {
+                PyValueError::new_err(format!("measurements[{j}]: not a Measurement: {error}"))
+            };
+            let fields = item.cast::<PyTuple>().map_err(|e| not_one(e.into()))?;
+            if fields.len() != 11 {
+                return Err(PyValueError::new_err(format!(
+                    "measurements[{j}]: not a Measurement: {} fields, not 11",
+                    fields.len()
+                )));
+            }
+            let field = |i: usize| fields.get_item(i);
+            let seq: u64 = field(0)?.extract().map_err(not_one)?;
+            let time: f64 = field(1)?.extract().map_err(not_one)?;
+            let cls = field(2)?;
+            let cls = cls
+                .cast::<PyString>()
+                .map_err(|e| not_one(e.into()))?
+                .to_str()?;
+            let cls = *self.classes.get(cls).ok_or_else(|| {
+                PyValueError::new_err(format!("measurements[{j}]: unknown class {cls:?}"))
+            })?;
+            let detector = field(5)?;
+            let detector = detector
+                .cast::<PyString>()
+                .map_err(|e| not_one(e.into()))?
+                .to_str()?;
+            let detector = *self.detectors.get(detector).ok_or_else(|| {
+                PyValueError::new_err(format!("measurements[{j}]: unknown detector {detector:?}"))
+            })?;
+            let z = float_values(&field(3)?).map_err(not_one)?;
+            let r_object = field(4)?;
+            let r = match &last_r {
+                Some((object, values)) if object.is(&r_object) => values.clone(),
+                _ => {
+                    let values = float_values(&r_object).map_err(not_one)?;
+                    last_r = Some((r_object, values.clone()));
+                    values
+                }
+            };
+            if z.len() != d || r.len() != d * d {
+                return Err(PyValueError::new_err(format!(
+                    "measurements[{j}]: expected z of {d} and R of {} values",
+                    d * d
+                )));
+            }
+            let source = field(6)?;
+            let source = if source.is_none() {
+                ""
+            } else {
+                source
+                    .cast::<PyString>()
+                    .map_err(|e| not_one(e.into()))?
+                    .to_str()?
+            };
+            let source = match &last_source {
+                Some(name) if &**name == source => name.clone(),
+                _ => {
+                    let name = Name::from(source);
+                    last_source = Some(name.clone());
+                    name
+                }
+            };
+            let label: Option<String> = field(7)?.extract().map_err(not_one)?;
+            let clutter_rate: f64 = field(8)?.extract().map_err(not_one)?;
+            let sensor = field(9)?;
+            let sensor = if sensor.is_none() {
+                None
+            } else {
+                Some(float_values(&sensor).map_err(not_one)?)
+            };
+            let time_std: f64 = field(10)?.extract().map_err(not_one)?;
+            scan.push(Measurement {
+                seq,
+                time,
+                cls,
+                z,
+                r,
+                detector,
+                source,
+                label: label.map(Name::from),
+                clutter_rate,
+                sensor,
+                time_std,
+            });
+        }
+        Ok(scan)
+    }
+
     /// `world::current` of `state` (a `CoreState`) as `{lineage: VersionRef}`, in the
     /// specification's order; `published` the objects shown now by id, `ids` theirs.
     fn current_refs<'py>(
@@ -573,99 +672,7 @@ impl PyEngine {
         measurements: &Bound<'_, PyList>,
         view: Option<ViewRow>,
     ) -> PyResult<PyState> {
-        let tables = &self.filter.tables;
-        let d = tables.dim;
-        let mut scan = Vec::with_capacity(measurements.len());
-        // a batch's detections share their class's noise array and usually their source:
-        // read each once (by identity; names by value)
-        let mut last_r: Option<(Bound<'_, PyAny>, Vec<f64>)> = None;
-        let mut last_source: Option<Name> = None;
-        for (j, item) in measurements.iter().enumerate() {
-            let not_one = |error: PyErr| {
-                PyValueError::new_err(format!("measurements[{j}]: not a Measurement: {error}"))
-            };
-            let fields = item.cast::<PyTuple>().map_err(|e| not_one(e.into()))?;
-            if fields.len() != 11 {
-                return Err(PyValueError::new_err(format!(
-                    "measurements[{j}]: not a Measurement: {} fields, not 11",
-                    fields.len()
-                )));
-            }
-            let field = |i: usize| fields.get_item(i);
-            let seq: u64 = field(0)?.extract().map_err(not_one)?;
-            let time: f64 = field(1)?.extract().map_err(not_one)?;
-            let cls = field(2)?;
-            let cls = cls
-                .cast::<PyString>()
-                .map_err(|e| not_one(e.into()))?
-                .to_str()?;
-            let cls = *self.classes.get(cls).ok_or_else(|| {
-                PyValueError::new_err(format!("measurements[{j}]: unknown class {cls:?}"))
-            })?;
-            let detector = field(5)?;
-            let detector = detector
-                .cast::<PyString>()
-                .map_err(|e| not_one(e.into()))?
-                .to_str()?;
-            let detector = *self.detectors.get(detector).ok_or_else(|| {
-                PyValueError::new_err(format!("measurements[{j}]: unknown detector {detector:?}"))
-            })?;
-            let z = float_values(&field(3)?).map_err(not_one)?;
-            let r_object = field(4)?;
-            let r = match &last_r {
-                Some((object, values)) if object.is(&r_object) => values.clone(),
-                _ => {
-                    let values = float_values(&r_object).map_err(not_one)?;
-                    last_r = Some((r_object, values.clone()));
-                    values
-                }
-            };
-            if z.len() != d || r.len() != d * d {
-                return Err(PyValueError::new_err(format!(
-                    "measurements[{j}]: expected z of {d} and R of {} values",
-                    d * d
-                )));
-            }
-            let source = field(6)?;
-            let source = if source.is_none() {
-                ""
-            } else {
-                source
-                    .cast::<PyString>()
-                    .map_err(|e| not_one(e.into()))?
-                    .to_str()?
-            };
-            let source = match &last_source {
-                Some(name) if &**name == source => name.clone(),
-                _ => {
-                    let name = Name::from(source);
-                    last_source = Some(name.clone());
-                    name
-                }
-            };
-            let label: Option<String> = field(7)?.extract().map_err(not_one)?;
-            let clutter_rate: f64 = field(8)?.extract().map_err(not_one)?;
-            let sensor = field(9)?;
-            let sensor = if sensor.is_none() {
-                None
-            } else {
-                Some(float_values(&sensor).map_err(not_one)?)
-            };
-            let time_std: f64 = field(10)?.extract().map_err(not_one)?;
-            scan.push(Measurement {
-                seq,
-                time,
-                cls,
-                z,
-                r,
-                detector,
-                source,
-                label: label.map(Name::from),
-                clutter_rate,
-                sensor,
-                time_std,
-            });
-        }
+        let scan = self.read_measurements(measurements)?;
         let view = view.map(sensor_view);
         let filter = self.filter.clone();
         let before = state.state.clone();
@@ -675,6 +682,46 @@ impl PyEngine {
         Ok(PyState {
             state: Arc::new(after),
         })
+    }
+
+    /// `process_measurements`, then `advance` of `book` over the state after the scan,
+    /// in one call (`WorldModel._step`): `(state, book)`; `source` the view's source.
+    #[pyo3(signature = (state, book, measurements, view=None, source=None))]
+    fn process_and_advance(
+        &self,
+        py: Python<'_>,
+        state: &PyState,
+        book: &PyBook,
+        measurements: &Bound<'_, PyList>,
+        view: Option<ViewRow>,
+        source: Option<String>,
+    ) -> PyResult<(PyState, PyBook)> {
+        let scan = self.read_measurements(measurements)?;
+        let detectors: Vec<usize> = scan.iter().map(|m| m.detector).collect();
+        let view = view.map(sensor_view);
+        let source = source.map(Name::from);
+        let filter = self.filter.clone();
+        let (before, before_book) = (state.state.clone(), book.book.clone());
+        let (after, after_book) = run(py, "Engine.process_and_advance", move || {
+            let after = filter.process_scan(&before, &scan, view.as_ref())?;
+            let book = crate::confidence::advance(
+                &before_book,
+                &after,
+                &detectors,
+                view.as_ref(),
+                source.as_ref(),
+                &filter.tables,
+            )?;
+            Ok((after, book))
+        })?;
+        Ok((
+            PyState {
+                state: Arc::new(after),
+            },
+            PyBook {
+                book: Arc::new(after_book),
+            },
+        ))
     }
 
     /// The class names, in the order of their indices.
