@@ -17,6 +17,7 @@ from semwm.knowledge.model import Knowledge
 from semwm.mhf.measurement import Measurement
 
 DetectionInput = Detection | Mapping[str, Any]
+_new_tuple = tuple.__new__
 
 
 class ClassesHeld(ValueError):
@@ -99,22 +100,42 @@ def check(
     classes, detectors = knowledge.classes, knowledge.detectors
     default_detector = knowledge.default_detector
     pairs: dict[tuple[str, str], _Resolved] = {}  # once per (class, detector) a batch
+    append = measurements.append
     for index, det in enumerate(detections):
         detector = det.detector if det.detector is not None else default_detector
+        cls = det.cls
+        sensor = det.sensor_position
         if (  # the common case, nothing to report: no problem list, no closure
             det.covariance is None
-            and det.cls in classes
+            and cls in classes
             and detector in detectors
             and len(det.position) == d
-            and (det.sensor_position is None or len(det.sensor_position) == d)
+            and (sensor is None or len(sensor) == d)
         ):
             if not problems:
-                pair = pairs.get((det.cls, detector))
+                pair = pairs.get((cls, detector))
                 if pair is None:
-                    pair = pairs[det.cls, detector] = _resolved(
-                        det.cls, detector, knowledge, factory
+                    pair = pairs[cls, detector] = _resolved(cls, detector, knowledge, factory)
+                # _measurement, inline (once per detection; the named tuple made as
+                # its own __new__ makes it, without that Python-level call)
+                append(
+                    _new_tuple(
+                        Measurement,
+                        (
+                            first_seq + index,
+                            det.time,
+                            cls,
+                            np.array(det.position, dtype=float),
+                            pair.R,
+                            detector,
+                            det.source,
+                            det.label if pair.trust_labels else None,
+                            pair.clutter_rate,
+                            None if sensor is None else np.array(sensor, dtype=float),
+                            det.time_std or 0.0,
+                        ),
                     )
-                measurements.append(_measurement(det, first_seq + index, detector, pair))
+                )
             continue
         found: list[DetectionProblem] = []
 

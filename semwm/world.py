@@ -221,8 +221,13 @@ def _grouped(
     """A batch's detections by scan (time, source), and its sensor view by scan."""
     scans: dict[ScanKey, list[Measurement]] = {}
     views: dict[ScanKey, SensorView] = {}
-    for m in measurements:
-        scans.setdefault(_scan_key(m), []).append(m)
+    for m in measurements:  # _scan_key, inline (once per detection)
+        key = (m.time, m.source or "")
+        group = scans.get(key)
+        if group is None:
+            scans[key] = [m]
+        else:
+            group.append(m)
     if view is not None:
         key = _view_key(view)
         scans.setdefault(key, [])
@@ -510,8 +515,9 @@ class WorldModel:
             if earliest < latest - self.reorder_window - 1e-12:
                 raise OutOfOrderError(earliest, latest, self.reorder_window)
             floor = self._replay_floor
-            keys = [_scan_key(m) for m in used] + ([_view_key(view)] if view is not None else [])
-            if floor is not None and min(keys) <= floor[0]:
+            if floor is not None and min(
+                [_scan_key(m) for m in used] + ([_view_key(view)] if view is not None else [])
+            ) <= floor[0]:
                 raise OutOfOrderError(earliest, latest, latest - floor[0][0], why=floor[1])
         if times:
             newest, earliest = max(times), min(times)
