@@ -443,16 +443,28 @@ class WorldService:
     ) -> float:
         """A batch's place among queued ones: its earliest time on the service clock
         (with today's clock offsets; only the order of entry depends on it)."""
-        stamps = [_stamp(d) for d in detections]
-        if sensor is not None:
-            stamps.append((sensor.get("source", _first_source(detections)), sensor.get("time")))
         earliest: dict[str | None, float] = {}  # per source: placing keeps the order
-        for source, t in stamps:
+
+        def note(source: str | None, t: Any) -> None:
             # a time the model will refuse (not a number, infinite) does not jump ahead
             if isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t):
                 known = earliest.get(source)
                 if known is None or t < known:
                     earliest[source] = t
+
+        for d in detections:
+            if type(d) is dict:  # the common case, without a call per detection
+                source, t = d.get("source"), d.get("time")
+                if type(t) is float and t - t == 0.0:  # finite
+                    known = earliest.get(source)
+                    if known is None or t < known:
+                        earliest[source] = t
+                    continue
+            else:
+                source, t = _stamp(d)
+            note(source, t)
+        if sensor is not None:
+            note(sensor.get("source", _first_source(detections)), sensor.get("time"))
         with self._sources_lock:
             times = [self.sources.to_service_time(source, t) for source, t in earliest.items()]
         return min(times, default=-math.inf)
@@ -537,7 +549,8 @@ class WorldService:
         except TimeGuardError as error:
             raise InvalidError(_time_items(error, batch)) from error
         with stage("sources"):
-            late_to_drop = self._late_to_drop(placement)
+            late = self._late_by(placement)  # once: both checks below need it
+            late_to_drop = self._late_to_drop(placement, late)
         if late_to_drop:
             with self._sources_lock:
                 self.sources.dropped(placement)
@@ -545,16 +558,19 @@ class WorldService:
             dropped = IngestResult(applied=0, time=self._model.latest_time)
             return Committed(dropped, self._commit, dropped=True)
         with stage("sources"):
-            self._refuse_late_if_behind(placement)
-            placed = [
-                d.to_dict() if isinstance(d, Detection) else dict(d) for d in placement.detections
-            ]
+            self._refuse_late_if_behind(placement, late)
             # the world model takes the checked values as they are (no second validation of
             # every detection); the journal keeps their plain form
-            values = [
-                d if isinstance(d, Detection) else placed[i]
-                for i, d in enumerate(placement.detections)
-            ]
+            placed: list[dict[str, Any]] = []
+            values: list[Detection | dict[str, Any]] = []
+            for d in placement.detections:
+                if isinstance(d, Detection):
+                    placed.append(d.to_dict())
+                    values.append(d)
+                else:
+                    plain = dict(d)
+                    placed.append(plain)
+                    values.append(plain)
         if sensor is not None:
             _check_sensor(sensor)  # before the journal writes it (issue 30)
         started = time.perf_counter()
@@ -610,12 +626,12 @@ class WorldService:
                 self._recent.popitem(last=False)
         return committed
 
-    def _late_to_drop(self, placement: Placement) -> bool:
+    def _late_to_drop(self, placement: Placement, late: float | None) -> bool:
         """Whether a batch is late (older than the newest scan processed: it would be
         replayed, or refused) and every source of it asked for late scans to be
-        dropped (``PUT /sources/NAME/policy {"late": "drop"}``)."""
-        earliest = self._late_by(placement)
-        if earliest is None:
+        dropped (``PUT /sources/NAME/policy {"late": "drop"}``). ``late``: its
+        :meth:`_late_by`."""
+        if late is None:
             return False
         with self._sources_lock:
             return all(self.sources.drops_late(s) for s in placement.counts)
@@ -636,7 +652,7 @@ class WorldService:
         earliest = min(times, default=math.inf)
         return newest - earliest if earliest < newest else None
 
-    def _refuse_late_if_behind(self, placement: Placement) -> None:
+    def _refuse_late_if_behind(self, placement: Placement, late: float | None) -> None:
         """409 at once for a late batch (it would be replayed) while the service is
         behind: replays took more than :attr:`replay_limit` of the last
         :attr:`replay_window` s. Nothing is applied; the source's ``late`` counts it.
@@ -652,8 +668,7 @@ class WorldService:
         again later is later still, and a robot that waits ``Retry-After`` before each
         of its queued scans falls further behind the others, whose scans then make all
         of its own too late (20 s trials, one core taken: 73 % 409 and 173 det/s with a
-        503, 39 % and 918 det/s with this 409)."""
-        late = self._late_by(placement)
+        503, 39 % and 918 det/s with this 409). ``late``: the batch's :meth:`_late_by`."""
         if late is None or late > self._model.reorder_window:
             return  # in order; or beyond the window, where the model's 409 says so
         share = self.replay_share()
