@@ -465,6 +465,8 @@ def machine_info() -> dict[str, Any]:
         "python": platform.python_version(),
         "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         "commit": _commit(),
+        # the other work on the machine: 1, 5 and 15 minute load averages now
+        "load_average": [round(x, 2) for x in os.getloadavg()],
         "versions": {n: _version(n) for n in ("semwm", "stonesoup", "filterpy", "numpy", "scipy")},
     }
 

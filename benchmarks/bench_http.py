@@ -666,6 +666,11 @@ def _met(value: float | None, target: float) -> str:
     return "—" if value is None else ("met" if value >= target else "not met")
 
 
+def _load(m: dict[str, Any]) -> str:
+    load = m.get("load_average")
+    return "not recorded" if load is None else f"{load[0]:g}"
+
+
 def markdown(doc: dict[str, Any]) -> str:
     """The results as markdown tables (``http.md``, benchmarks/README.md)."""
     m = doc["machine"]
@@ -679,8 +684,9 @@ def markdown(doc: dict[str, Any]) -> str:
         f"client per robot, the robots of a tick at once); in process: `WorldModel.ingest` of "
         f"the same `Detection` values with the same engine. Servers: {servers}. Medians of "
         f"{doc['repeats']} runs, each in process then over HTTP, engine after engine, back to "
-        f"back. Machine: {m['platform']}, {m['cpu_count']} CPUs ({m.get('processor') or '?'}) "
-        f"shared with other jobs, Python {m['python']}, {m['date']}, commit {m.get('commit')}; "
+        f"back. Machine: {m['platform']}, {m['cpu_count']} CPUs ({m.get('processor') or '?'}), "
+        f"1-minute load average {_load(m)} at the end, Python {m['python']}, {m['date']}, "
+        f"commit {m.get('commit')}; "
         "sizes: " + ", ".join(f"{k} {v}" for k, v in doc["sizes"].items()) + ".",
         "",
         "## One scan per request",

@@ -660,7 +660,8 @@ def run(quick: bool, repeats: int) -> dict[str, Any]:
     long_name, long_duration = QUICK_LONG if quick else LONG
     grid_timed = QUICK_GRID_TIMED if quick else GRID_TIMED
     team_seconds = QUICK_TEAM_SECONDS if quick else TEAM_SECONDS
-    started = machine_info()["date"]
+    at_start = machine_info()
+    started, load = at_start["date"], at_start["load_average"]
     doc: dict[str, Any] = {
         "benchmark": "speed",
         "quick": quick,
@@ -759,7 +760,9 @@ def run(quick: bool, repeats: int) -> dict[str, Any]:
             bar.update()
     doc["rows"] = table(doc)
     machine = machine_info()
-    doc["machine"] = {**machine, "started": started, "finished": machine["date"]}
+    doc["machine"] = {
+        **machine, "started": started, "finished": machine["date"], "load_at_start": load,
+    }  # fmt: skip
     return doc
 
 
@@ -834,14 +837,23 @@ def _met(met: bool | None) -> str:
     return "—" if met is None else ("met" if met else "**not met**")
 
 
+def _load(m: dict[str, Any]) -> str:
+    """The machine's other work during the run: its 1-minute load average at the start
+    and at the end (2 CPUs: a load of 1 is this benchmark alone)."""
+    start, end = m.get("load_at_start"), m.get("load_average")
+    if start is None or end is None:
+        return "load not recorded"
+    return f"1-minute load average {start[0]:g} at the start and {end[0]:g} at the end"
+
+
 def markdown(doc: dict[str, Any]) -> str:
     m = doc["machine"]
     results = doc["results"]
     lines = [
         "# Speed: the Python engine, the Rust engine and Stone Soup JPDA (issue 29)",
         "",
-        f"Machine: {m['platform']}, {m['cpu_count']} CPUs ({m.get('processor') or '?'}) shared "
-        f"with other engineers' jobs, Python {m['python']}; run {m['started']} to "
+        f"Machine: {m['platform']}, {m['cpu_count']} CPUs ({m.get('processor') or '?'}), "
+        f"{_load(m)}, Python {m['python']}; run {m['started']} to "
         f"{m['finished']}, commit {str(m.get('commit'))[:10]}; versions: "
         + ", ".join(f"{k} {v}" for k, v in m["versions"].items())
         + f". Best of {doc['repeats']} interleaved runs{' (quick)' if doc['quick'] else ''}; "
