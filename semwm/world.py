@@ -1005,6 +1005,9 @@ class WorldModel:
 
     def _publish_changed(self, current: Mapping[int, Track | VersionRef]) -> None:
         """:meth:`_publish` in general: ``current`` the published world now."""
+        # new tables, changed below: the ones given out (a query's cached tables, the
+        # held scans' chain) must not change under their holders
+        self._ids, self._lost = dict(self._ids), dict(self._lost)
         state = self._state
         dim = self._knowledge.world.dimension
         alive = self._lineages(state)
