@@ -3,8 +3,10 @@
 //! builds the knowledge's tables with the Python engine's own code and wraps both.
 //!
 //! A scan's detections cross as one list of plain tuples, a state stays in the core;
-//! Python reads a state's clusters and versions (to publish them, for the tests and the
-//! hypotheses view) through `State`'s methods, which copy only what is asked for.
+//! Python reads a state's clusters and versions (for queries, the tests and the
+//! hypotheses view) through `State`'s methods, which copy only what is asked for. The
+//! published world crosses as `VersionRef`s made here (`Engine.current`,
+//! `Engine.publish`, which also gives publishing's common case).
 
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
