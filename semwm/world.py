@@ -207,6 +207,21 @@ def _within(value: float, low: float, high: float) -> bool:
     return low <= value <= high
 
 
+def _within_reach(
+    position: Sequence[float], sensor: Sequence[float], reach: float | None
+) -> bool:
+    """Whether a detection lies within its detector's ``reach`` of its sensor: then
+    :func:`semwm.validation.out_of_range` keeps it whatever the margin (the same
+    distance, summed in the same order)."""
+    if reach is None:
+        return True
+    squared = 0.0
+    for a, b in zip(position, sensor, strict=True):
+        value = float(a) - float(b)
+        squared += value * value
+    return math.sqrt(squared) <= reach
+
+
 def _view_key(view: SensorView) -> ScanKey:
     return (view.time, view.source or "")
 
@@ -541,15 +556,20 @@ class WorldModel:
         self, parsed: list[Detection], measurements: list[Measurement]
     ) -> tuple[list[Measurement], list[IgnoredDetection]]:
         """The batch's measurements used, and why each other detection is not
-        (:meth:`_ignored`). A detection with the class's noise and no sensor position
-        inside the region's bounds for its (class, detector) is used without a call per
-        detection: the common case, decided as :meth:`_ignored` decides it."""
+        (:meth:`_ignored`). A detection with the class's noise, within its detector's
+        range of its sensor position (if it gives one) and inside the region's bounds for
+        its (class, detector) is used without a call to :meth:`_ignored`: the common
+        case, decided as :meth:`_ignored` decides it."""
         used: list[Measurement] = []
         skipped: list[IgnoredDetection] = []
         bounds = self._region_bounds
         plain = self._knowledge.world.region is None
+        detectors = self._knowledge.detectors
         for index, (m, d) in enumerate(zip(measurements, parsed, strict=True)):
-            if d.sensor_position is None and d.covariance is None:
+            sensor = d.sensor_position
+            if d.covariance is None and (
+                sensor is None or _within_reach(d.position, sensor, detectors[m.detector].range)
+            ):
                 if plain:
                     used.append(m)
                     continue
