@@ -15,7 +15,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import AbstractContextManager, ExitStack, contextmanager
+from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Generic, Literal, Protocol, TypeVar
@@ -578,7 +578,9 @@ class WorldService:
             with stage("sources"):
                 self._check_sources(placed, batch)
             try:
-                with self._hooked(batch_record(placed, sensor)):
+                # the record (a copy of every detection) only for hooks that take it
+                hooked = self._hooked(batch_record(placed, sensor)) if self.hooks else nullcontext()
+                with hooked:
                     replayed, began = self._model.replayed_scans, time.perf_counter()
                     with stage("model"):
                         result = self._model.ingest(values, sensor=sensor)
