@@ -116,26 +116,7 @@ def check(
                 pair = pairs.get((cls, detector))
                 if pair is None:
                     pair = pairs[cls, detector] = _resolved(cls, detector, knowledge, factory)
-                # _measurement, inline (once per detection; the named tuple made as
-                # its own __new__ makes it, without that Python-level call)
-                append(
-                    _new_tuple(
-                        Measurement,
-                        (
-                            first_seq + index,
-                            det.time,
-                            cls,
-                            np.array(det.position, dtype=float),
-                            pair.R,
-                            detector,
-                            det.source,
-                            det.label if pair.trust_labels else None,
-                            pair.clutter_rate,
-                            None if sensor is None else np.array(sensor, dtype=float),
-                            det.time_std or 0.0,
-                        ),
-                    )
-                )
+                append(_measurement(det, first_seq + index, detector, pair))
             continue
         found: list[DetectionProblem] = []
 
@@ -194,19 +175,24 @@ def _resolved(cls: str, detector: str, knowledge: Knowledge, factory: FilterFact
 
 
 def _measurement(det: Detection, seq: int, detector: str, pair: _Resolved) -> Measurement:
-    """A checked detection with its noise and clutter rate resolved."""
-    return Measurement(
-        seq,
-        det.time,
-        det.cls,
-        np.asarray(det.position, dtype=float),
-        pair.R,
-        detector,
-        det.source,
-        det.label if pair.trust_labels else None,
-        pair.clutter_rate,
-        None if det.sensor_position is None else np.asarray(det.sensor_position, dtype=float),
-        det.time_std or 0.0,
+    """A checked detection with its noise and clutter rate resolved (the named tuple made
+    as its own ``__new__`` makes it, without that Python-level call: once per detection)."""
+    sensor = det.sensor_position
+    return _new_tuple(
+        Measurement,
+        (
+            seq,
+            det.time,
+            det.cls,
+            np.array(det.position, dtype=float),
+            pair.R,
+            detector,
+            det.source,
+            det.label if pair.trust_labels else None,
+            pair.clutter_rate,
+            None if sensor is None else np.array(sensor, dtype=float),
+            det.time_std or 0.0,
+        ),
     )
 
 

@@ -351,22 +351,8 @@ impl PyEngine {
             let field = |i: usize| fields.get_item(i);
             let seq: u64 = field(0)?.extract().map_err(not_one)?;
             let time: f64 = field(1)?.extract().map_err(not_one)?;
-            let cls = field(2)?;
-            let cls = cls
-                .cast::<PyString>()
-                .map_err(|e| not_one(e.into()))?
-                .to_str()?;
-            let cls = *self.classes.get(cls).ok_or_else(|| {
-                PyValueError::new_err(format!("measurements[{j}]: unknown class {cls:?}"))
-            })?;
-            let detector = field(5)?;
-            let detector = detector
-                .cast::<PyString>()
-                .map_err(|e| not_one(e.into()))?
-                .to_str()?;
-            let detector = *self.detectors.get(detector).ok_or_else(|| {
-                PyValueError::new_err(format!("measurements[{j}]: unknown detector {detector:?}"))
-            })?;
+            let cls = index_of(&self.classes, &field(2)?, "class", j)?;
+            let detector = index_of(&self.detectors, &field(5)?, "detector", j)?;
             let z = float_values(&field(3)?).map_err(not_one)?;
             let r_object = field(4)?;
             let r = match &last_r {
@@ -471,6 +457,24 @@ impl PyEngine {
         }
         Ok((current, order))
     }
+}
+
+/// The index of measurement `j`'s class or detector name (`what`) in `names`.
+fn index_of(
+    names: &HashMap<String, usize>,
+    name: &Bound<'_, PyAny>,
+    what: &str,
+    j: usize,
+) -> PyResult<usize> {
+    let name = name.cast::<PyString>().map_err(|error| {
+        let error: PyErr = error.into();
+        PyValueError::new_err(format!("measurements[{j}]: not a Measurement: {error}"))
+    })?;
+    let name = name.to_str()?;
+    names
+        .get(name)
+        .copied()
+        .ok_or_else(|| PyValueError::new_err(format!("measurements[{j}]: unknown {what} {name:?}")))
 }
 
 /// A float64 array's values in row-major order (copied: no borrow is held, as the
