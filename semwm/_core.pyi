@@ -237,3 +237,18 @@ class VersionRef:
     def serial(self) -> int: ...
     @property
     def state(self) -> Any: ...
+
+class DetectionReader:
+    """The Rust engine's reader of plain batches (``semwm.validation.core_reader``)."""
+
+    def __init__(
+        self,
+        measurement: type,
+        detection: type,
+        dimension: int,
+        max_time: float,
+        max_time_std: float,
+        default_detector: str,
+        pairs: dict[tuple[str, str], Any],
+    ) -> None: ...
+    def read(self, batch: list[Any], first_seq: int) -> list[Any] | None: ...

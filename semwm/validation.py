@@ -5,16 +5,19 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Iterable, Mapping
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from pydantic import TypeAdapter, ValidationError
 from scipy.special import chdtri
 
-from semwm.detection import Detection, DetectionError, DetectionProblem
+from semwm.detection import MAX_TIME, MAX_TIME_STD, Detection, DetectionError, DetectionProblem
 from semwm.filters.factory import FilterFactory
 from semwm.knowledge.model import Knowledge
 from semwm.mhf.measurement import Measurement
+
+if TYPE_CHECKING:
+    from semwm import _core
 
 DetectionInput = Detection | Mapping[str, Any]
 _new_tuple = tuple.__new__
@@ -193,6 +196,38 @@ def _measurement(det: Detection, seq: int, detector: str, pair: _Resolved) -> Me
             None if sensor is None else np.array(sensor, dtype=float),
             det.time_std or 0.0,
         ),
+    )
+
+
+def core_reader(knowledge: Knowledge, factory: FilterFactory) -> _core.DetectionReader:
+    """The Rust engine's reader of plain batches (``core/src/python/reader.rs``): what
+    :func:`parse`, :func:`check` and ``WorldModel._placed`` make of a batch whose every
+    detection is plain, in one pass (its ``read`` answers ``None`` for any other batch,
+which then takes the specification's path). It is handed what
+    this module computes: each (class, detector) pair's :func:`_resolved` values, its
+    detector's range and :func:`region_bounds` for its noise."""
+    from semwm import _core
+
+    pairs: dict[tuple[str, str], Any] = {}
+    for cls in knowledge.classes:
+        for detector, spec in knowledge.detectors.items():
+            pair = _resolved(cls, detector, knowledge, factory)
+            bounds = region_bounds(knowledge, pair.R)
+            pairs[cls, detector] = (
+                pair.R,
+                pair.trust_labels,
+                float(pair.clutter_rate),
+                None if spec.range is None else float(spec.range),
+                bounds,
+            )
+    return _core.DetectionReader(
+        Measurement,
+        Detection,
+        knowledge.world.dimension,
+        MAX_TIME,
+        MAX_TIME_STD,
+        knowledge.default_detector,
+        pairs,
     )
 
 

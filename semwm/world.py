@@ -65,6 +65,7 @@ from semwm.validation import (
     DetectionInput,
     as_batch,
     check,
+    core_reader,
     out_of_range,
     outside_region,
     parse,
@@ -299,7 +300,8 @@ class WorldModel:
         arrival jitter (docs/operations.md).
     engine
         ``"python"`` or ``"rust"``: who runs the numeric kernels (docs/engines.md);
-        ``None`` (default): ``$SEMWM_ENGINE``, else ``"python"``. ``"rust"`` without
+        ``None`` (default): ``$SEMWM_ENGINE``, else ``"rust"`` where the extension is
+        built (:func:`~semwm.filters.engine.resolve_engine`). ``"rust"`` without
         the built extension raises :class:`~semwm.filters.engine.EngineUnavailable`.
 
     The reorder history is also bounded in count (:attr:`max_reorder_scans`): past
@@ -334,6 +336,10 @@ class WorldModel:
         self._region_bounds: dict[tuple[str, str], tuple[list[float], list[float]] | None] = {}
         self._knowledge = knowledge
         self._mhf = MultipleHypothesisFilter(knowledge, self.engine)
+        # the Rust engine reads plain batches in one pass, as the three below decide
+        self._reader = (
+            core_reader(knowledge, self._mhf.factory) if self.engine == "rust" else None
+        )
         self._summaries = {}  # the region may have changed
 
     def reset(self) -> None:
@@ -518,10 +524,15 @@ class WorldModel:
         sensor: SensorReport | Mapping[str, Any] | None,
     ) -> IngestResult:
         batch = as_batch(detections)
-        parsed = parse(batch)
-        measurements = check(parsed, self._knowledge, self._mhf.factory, self._seq)
+        read = self._reader.read(batch, self._seq) if self._reader is not None else None
+        if read is None:  # the specification: parse, check against the knowledge, place
+            parsed = parse(batch)
+            measurements = check(parsed, self._knowledge, self._mhf.factory, self._seq)
+            used, skipped = self._placed(parsed, measurements)
+        else:  # every detection plain, used as read
+            measurements = used = read
+            skipped = []
         view = self._view(sensor, measurements) if sensor is not None else None
-        used, skipped = self._placed(parsed, measurements)
         ignored = len(skipped)
         latest = self._state.time
         times = [m.time for m in used] + ([view.time] if view is not None else [])

@@ -23,7 +23,8 @@ from semwm.persistence.replay import knowledge_from_payload
 from semwm.world import WorldModel
 
 SNAPSHOT_FORMAT = 1
-_DERIVED = ("_knowledge", "_mhf", "_region_bounds")  # rebuilt from the knowledge document
+# rebuilt from the knowledge document, with the engine of the process that restores
+_DERIVED = ("_knowledge", "_mhf", "_region_bounds", "_reader", "engine")
 
 
 def _code_tag() -> str:

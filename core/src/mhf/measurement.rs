@@ -47,3 +47,49 @@ impl SensorView {
         self.looking_at.contains(&lineage)
     }
 }
+
+/// Whether a detection at `position` lies within its detector's `reach` of its sensor
+/// (`semwm.world._within_reach`): the distance summed in the specification's order.
+/// `semwm.validation.out_of_range` keeps every such detection, whatever its margin.
+pub fn within_reach(position: &[f64], sensor: &[f64], reach: Option<f64>) -> bool {
+    let Some(reach) = reach else {
+        return true;
+    };
+    let mut squared = 0.0;
+    for (a, b) in position.iter().zip(sensor) {
+        let value = a - b;
+        squared += value * value;
+    }
+    squared.sqrt() <= reach
+}
+
+/// Whether every coordinate lies within the region's bounds widened by the noise
+/// (`low <= value <= high` per axis, as `semwm.world._within`).
+pub fn within_bounds(position: &[f64], low: &[f64], high: &[f64]) -> bool {
+    position
+        .iter()
+        .zip(low.iter().zip(high))
+        .all(|(value, (low, high))| *low <= *value && *value <= *high)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reach_is_inclusive_and_unbounded_without_a_range() {
+        assert!(within_reach(&[3.0, 4.0], &[0.0, 0.0], Some(5.0)));
+        assert!(!within_reach(&[3.0, 4.0], &[0.0, 0.0], Some(4.999)));
+        assert!(within_reach(&[1e9, 0.0], &[0.0, 0.0], None));
+        assert!(!within_reach(&[f64::NAN, 0.0], &[0.0, 0.0], Some(1.0)));
+    }
+
+    #[test]
+    fn bounds_hold_every_axis_inclusively() {
+        let (low, high) = ([0.0, 0.0], [1.0, 2.0]);
+        assert!(within_bounds(&[0.0, 2.0], &low, &high));
+        assert!(!within_bounds(&[0.5, 2.1], &low, &high));
+        assert!(!within_bounds(&[-1e-12, 1.0], &low, &high));
+        assert!(!within_bounds(&[f64::NAN, 1.0], &low, &high));
+    }
+}

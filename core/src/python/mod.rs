@@ -10,6 +10,7 @@
 
 mod engine;
 mod rates;
+mod reader;
 mod similar;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -972,5 +973,6 @@ fn semwm_core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<engine::PyState>()?;
     module.add_class::<engine::PyBook>()?;
     module.add_class::<engine::PyVersionRef>()?;
+    module.add_class::<reader::PyDetectionReader>()?;
     Ok(())
 }

@@ -1,0 +1,203 @@
+"""The Rust engine's reader of plain batches (``core/src/python/reader.rs``) held to the
+specification's three passes (``parse``, ``check``, ``WorldModel._placed``).
+
+Random batches mix plain detections with every way a detection can leave the common
+case: a value of another type, a field the model does not know, an own covariance, an
+unknown class or detector, a position off the world's dimension, near a detector's
+range or the region's edge. Whatever the reader makes must be what the specification
+makes, field by field; it may give a batch back (``None``) only when the batch holds
+such a detection, never for a plain one.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from semwm.detection import Detection, DetectionError
+from semwm.knowledge.loader import load_knowledge
+from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.mhf.measurement import Measurement
+from semwm.validation import as_batch, check, core_reader, parse
+from semwm.world import WorldModel
+
+from . import needs_rust
+
+pytestmark = needs_rust
+
+ROBOCUP = load_knowledge(shipped_knowledge_path("robocup.yaml"))  # region, ranges, labels
+SIM1 = load_knowledge(shipped_knowledge_path("sim1.yaml"))  # neither region nor ranges
+
+
+def _odd(plain: Any) -> st.SearchStrategy[Any]:
+    """Values a plain field never holds: of other types, or out of the model's bounds."""
+    return st.sampled_from([1, True, "1.0", math.nan, math.inf, -math.inf, 2e12, [], None])
+
+
+@st.composite
+def detections(draw: st.DrawFn, knowledge: Any) -> tuple[Any, bool]:
+    """A detection (a dict, or a ``Detection`` where it validates as one) and whether
+    anything of it leaves the plain case (then the reader may give the batch back)."""
+    dim = knowledge.world.dimension
+    region = knowledge.world.region or [(-20.0, 20.0)] * dim
+    odd = False
+    edge = st.sampled_from([-1.0, 1.0]).map(float)
+    near = [draw(st.floats(low, high)) for low, high in region]
+    if draw(st.integers(0, 4)) == 0:  # about the region's edge, either side of its margin
+        axis = draw(st.integers(0, dim - 1))
+        low, high = region[axis]
+        near[axis] = (high if draw(edge) > 0 else low) + draw(st.floats(-2.5, 2.5))
+        odd = True
+    item: dict[str, Any] = {
+        "time": draw(st.floats(-100.0, 100.0)),
+        "class": draw(st.sampled_from(sorted(knowledge.classes))),
+        "position": near,
+    }
+    detector = draw(st.sampled_from([None, *knowledge.detectors]))
+    if detector is not None:
+        item["detector"] = detector
+    for key, values in (
+        ("source", st.sampled_from([None, "r1", "r2", ""])),
+        ("label", st.sampled_from([None, "me", "you"])),
+        ("time_std", st.sampled_from([None, 0.0, -0.0, 0.05, 10.0])),
+    ):
+        if draw(st.booleans()):
+            item[key] = draw(values)
+    if draw(st.booleans()):  # a sensor position, within or about its detector's range
+        reach = knowledge.detectors[detector or knowledge.default_detector].range or 3.0
+        angle = draw(st.floats(0.0, 2 * math.pi))
+        distance = draw(st.sampled_from([0.0, 0.5 * reach, reach, reach + 0.3, 2 * reach]))
+        odd = odd or distance >= reach
+        offset = [distance * math.cos(angle), distance * math.sin(angle), 0.0][:dim]
+        item["sensor_position"] = [a - b for a, b in zip(near, offset, strict=True)]
+    change = draw(st.integers(0, 30))
+    if change == 1:
+        item[draw(st.sampled_from(["time", "class", "position", "sensor_position"]))] = draw(
+            _odd(None)
+        )
+    elif change == 2:
+        item["position"] = [*near, 0.0] if draw(st.booleans()) else near[:1]
+    elif change == 3:
+        item["covariance"] = [[0.04 if i == j else 0.0 for j in range(dim)] for i in range(dim)]
+    elif change == 4:
+        item["class" if draw(st.booleans()) else "detector"] = "Unknown"
+    elif change == 5:
+        item["cls"] = item.pop("class")  # the field's name, which pydantic also takes
+    elif change == 6:
+        item["extra"] = 1.0
+    elif change == 7:
+        item["position"] = tuple(int(v) for v in near)
+    elif change == 8:
+        item[draw(st.sampled_from(["source", "label", "time_std"]))] = draw(_odd(None))
+    odd = odd or change in range(1, 9)
+    if draw(st.booleans()):
+        try:
+            return Detection.model_validate(item), odd
+        except ValueError:
+            pass
+    return item, odd
+
+
+def _specification(
+    model: WorldModel, batch: list[Any], first_seq: int
+) -> tuple[list[Measurement], int] | None:
+    """The specification's measurements used and how many it ignores (``None``: refused)."""
+    try:
+        parsed = parse(as_batch(batch))
+        measurements = check(parsed, model.knowledge, model._mhf.factory, first_seq)
+    except DetectionError:
+        return None
+    used, skipped = model._placed(parsed, measurements)
+    return used, len(skipped)
+
+
+def _same(read: Measurement, expected: Measurement) -> None:
+    for name, a, b in zip(Measurement._fields, read, expected, strict=True):
+        assert type(a) is type(b), name
+        if isinstance(a, np.ndarray):
+            assert a.dtype == b.dtype and a.shape == b.shape, name
+            assert np.array_equal(a, b), name
+        else:
+            assert a == b, name
+    assert read.R is expected.R  # the pair's shared noise, read once by the core
+
+
+@pytest.mark.parametrize("knowledge", [ROBOCUP, SIM1], ids=["robocup", "sim1"])
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_the_reader_makes_what_the_specification_makes(knowledge: Any, data: Any) -> None:
+    model = WorldModel(knowledge, engine="rust")
+    reader = core_reader(knowledge, model._mhf.factory)
+    drawn = data.draw(st.lists(detections(knowledge), min_size=1, max_size=4))
+    batch = [item for item, _ in drawn]
+    first_seq = data.draw(st.integers(0, 10**6))
+    read = reader.read(batch, first_seq)
+    expected = _specification(model, batch, first_seq)
+    if read is None:
+        assert any(odd for _, odd in drawn), f"a plain batch was given back: {batch}"
+        return
+    assert expected is not None, "the reader took a batch the specification refuses"
+    used, ignored = expected
+    assert ignored == 0, "the reader took a batch the specification ignores part of"
+    assert len(read) == len(used)
+    for a, b in zip(read, used, strict=True):
+        _same(a, b)
+
+
+def test_a_plain_batch_of_either_form_is_read() -> None:
+    """Dicts from the wire and ``Detection`` values alike; a label of a foreign class
+    is dropped as ``check`` drops it (paper 004: tracked from observation only)."""
+    model = WorldModel(ROBOCUP, engine="rust")
+    reader = core_reader(ROBOCUP, model._mhf.factory)
+    batch: list[Any] = [
+        {"time": 1.0, "class": "Opponent", "position": [1.0, 2.0], "label": "o7"},
+        Detection.model_validate(
+            {"time": 1.0, "class": "Peer", "position": [0.5, 0.5], "label": "me",
+             "detector": "self_localization", "sensor_position": [0.5, 0.4]}
+        ),
+    ]  # fmt: skip
+    read = reader.read(batch, 7)
+    assert read is not None
+    assert [m.seq for m in read] == [7, 8]
+    assert [m.label for m in read] == [None, "me"]
+    assert read[1].detector == "self_localization" and read[0].detector == "omnivision"
+    expected = _specification(model, batch, 7)
+    assert expected is not None
+    for a, b in zip(read, expected[0], strict=True):
+        _same(a, b)
+
+
+def test_models_with_and_without_the_reader_agree() -> None:
+    """The same batches, plain or not (ignored detections, refused batches), give the
+    same answers and the same world with the reader as through the specification."""
+    rng = np.random.default_rng(3)
+    fast, spec = (WorldModel(ROBOCUP, engine="rust") for _ in range(2))
+    spec._reader = None
+    for step in range(40):
+        batch: list[dict[str, Any]] = []
+        for _ in range(int(rng.integers(1, 5))):
+            item: dict[str, Any] = {
+                "time": step * 0.1,
+                "class": str(rng.choice(["Ball", "Opponent", "Peer"])),
+                "position": [float(rng.uniform(-10, 10)), float(rng.uniform(-7, 7))],
+                "source": "r1",
+            }
+            if rng.random() < 0.1:
+                item["class"] = "Unknown"
+            batch.append(item)
+        outcomes = []
+        for model in (fast, spec):
+            try:
+                outcomes.append(model.ingest(batch))
+            except DetectionError as error:
+                outcomes.append(str(error))
+        assert outcomes[0] == outcomes[1]
+        a, b = fast.world(), spec.world()
+        assert [(o.id, o.cls) for o in a.objects] == [(o.id, o.cls) for o in b.objects]
+        for x, y in zip(a.objects, b.objects, strict=True):
+            assert np.array_equal(x.position, y.position)
