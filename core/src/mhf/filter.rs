@@ -204,7 +204,7 @@ impl Filter {
             let classes: Vec<&str> = predicted
                 .rows
                 .iter()
-                .map(|r| self.tables.classes[r.version.cls].name.as_str())
+                .map(|r| self.tables.classes[r.version.cls].name.as_ref())
                 .collect();
             f = observed.source_rates(&scan.source, &lineages, &f, &classes);
         }
@@ -436,7 +436,7 @@ impl Filter {
         let classes: Vec<&str> = predicted
             .rows
             .iter()
-            .map(|r| self.tables.classes[r.version.cls].name.as_str())
+            .map(|r| self.tables.classes[r.version.cls].name.as_ref())
             .collect();
         let unconfirmed: Vec<bool> = predicted
             .rows
@@ -446,7 +446,7 @@ impl Filter {
         let mut rates: Vec<Option<Vec<f64>>> = vec![None; self.tables.detectors.len()];
         for m in measurements {
             if rates[m.detector].is_none() {
-                let detector = self.tables.detectors[m.detector].name.as_str();
+                let detector = self.tables.detectors[m.detector].name.as_ref();
                 rates[m.detector] = Some(observed.stream_rates(
                     (source, detector),
                     &lineages,
@@ -685,7 +685,7 @@ impl Filter {
             let priors: BTreeMap<String, f64> = tables
                 .classes
                 .iter()
-                .map(|c| (c.name.clone(), c.detection_probability))
+                .map(|c| (c.name.to_string(), c.detection_probability))
                 .collect();
             match view.detector {
                 Some(detector) => observed.detection_probabilities(
@@ -709,7 +709,7 @@ impl Filter {
             } else {
                 let spec = &tables.classes[version.cls];
                 let p_d = detection
-                    .get(&spec.name)
+                    .get(spec.name.as_ref())
                     .copied()
                     .unwrap_or(spec.detection_probability);
                 p_d * if view.looks_at(version.lineage) {
@@ -915,8 +915,7 @@ impl Filter {
             }
         }
         let existed: KeySet<u64> = before.tracks.values().map(|e| e.version.lineage).collect();
-        let name =
-            |detector: usize| -> Name { Arc::from(tables.detectors[detector].name.as_str()) };
+        let name = |detector: usize| -> Name { tables.detectors[detector].name.clone() };
         let mut detected: BTreeMap<Name, Vec<u64>> = BTreeMap::new();
         let mut born: BTreeMap<Name, Vec<u64>> = BTreeMap::new();
         let mut born_elsewhere: BTreeMap<Name, Vec<u64>> = BTreeMap::new();
@@ -947,10 +946,7 @@ impl Filter {
                         &mut born
                     };
                     target.entry(name(by)).or_default().push(lineage);
-                    classes.insert(
-                        lineage,
-                        Arc::from(tables.classes[version.cls].name.as_str()),
-                    );
+                    classes.insert(lineage, tables.classes[version.cls].name.clone());
                 } else if !existed.contains(&lineage) {
                     born_elsewhere.entry(name(by)).or_default().push(lineage);
                 }

@@ -12,6 +12,7 @@
 
 use crate::error::{KernelError, KernelResult};
 use crate::filters::factory::ClassTables;
+use crate::mhf::rates::Name;
 
 /// A class, by its index among the knowledge's sorted class names.
 pub type ClassId = usize;
@@ -45,7 +46,8 @@ pub struct Appearance {
 /// One class of the knowledge.
 #[derive(Debug, Clone)]
 pub struct ClassSpec {
-    pub name: String,
+    /// Shared: the observed rates keep it per object and scan without a copy.
+    pub name: Name,
     pub filter: ClassTables,
     /// `n x n`: a new object's state covariance.
     pub initial_covariance: Vec<f64>,
@@ -83,7 +85,8 @@ pub struct ClassSpec {
 /// One detector of the knowledge.
 #[derive(Debug, Clone)]
 pub struct DetectorSpec {
-    pub name: String,
+    /// Shared: the observed rates keep it per scan without a copy.
+    pub name: Name,
     /// log of the clutter's spatial density over its coverage (`mht`; 0 without one).
     pub clutter_log_density: f64,
     /// `K x K`, `[true class][reported class]`: L(reported | true), its confusion model.

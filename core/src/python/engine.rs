@@ -75,7 +75,7 @@ fn class_spec(class: &Bound<'_, PyDict>) -> PyResult<ClassSpec> {
         })
         .collect::<PyResult<Vec<_>>>()?;
     Ok(ClassSpec {
-        name: item(class, "name")?,
+        name: Name::from(item::<String>(class, "name")?),
         filter: filter.tables.clone(),
         initial_covariance: item(class, "initial_covariance")?,
         initial_mode_probabilities: item(class, "initial_mode_probabilities")?,
@@ -99,7 +99,7 @@ fn class_spec(class: &Bound<'_, PyDict>) -> PyResult<ClassSpec> {
 
 fn detector_spec(detector: &Bound<'_, PyDict>) -> PyResult<DetectorSpec> {
     Ok(DetectorSpec {
-        name: item(detector, "name")?,
+        name: Name::from(item::<String>(detector, "name")?),
         clutter_log_density: item(detector, "clutter_log_density")?,
         likelihood: item(detector, "likelihood")?,
         range: item(detector, "range")?,
@@ -535,14 +535,14 @@ impl PyEngine {
             .classes
             .iter()
             .enumerate()
-            .map(|(i, c)| (c.name.clone(), i))
+            .map(|(i, c)| (c.name.to_string(), i))
             .collect();
         let detectors = filter
             .tables
             .detectors
             .iter()
             .enumerate()
-            .map(|(i, d)| (d.name.clone(), i))
+            .map(|(i, d)| (d.name.to_string(), i))
             .collect();
         let names = filter
             .tables
@@ -736,7 +736,7 @@ impl PyEngine {
             .tables
             .classes
             .iter()
-            .map(|c| c.name.clone())
+            .map(|c| c.name.to_string())
             .collect()
     }
 }
