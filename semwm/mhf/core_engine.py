@@ -97,7 +97,8 @@ def tables(mhf: MultipleHypothesisFilter) -> dict[str, Any]:
             {
                 "name": name,
                 "clutter_log_density": float(associator.clutter_log_density[name]),
-                "likelihood": model._likelihood[name].ravel().tolist(),
+                # by report: a report's likelihoods over the true classes are one row
+                "likelihood": model._likelihood[name].T.ravel().tolist(),
                 "range": None if detector.range is None else float(detector.range),
                 "fixed": bool(detector.static),
                 "position": None

@@ -237,7 +237,7 @@ pub fn options(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Scan
             created: m.time,
             rate: tables.classes[cls].detection_frequency,
             class_probs: class_probs.into(),
-            sources: vec![m.source.clone()].into(),
+            sources: Arc::from([m.source.clone()]),
         });
         let density = if tables.mht {
             tables.detectors[m.detector].clutter_log_density
@@ -386,10 +386,10 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
     for (j, m) in measurements.iter().enumerate() {
         let trace_r: f64 = (0..d).map(|a| m.r[a * d + a]).sum();
         let time_var = m.time_std * m.time_std;
-        let reported = if mht {
+        let reported: &[f64] = if mht {
             classes::likelihood(tables, m.detector, m.cls)
         } else {
-            Vec::new()
+            &[]
         };
         let dense = !gated || (has_labels && m.label.is_some());
         if dense {
@@ -426,7 +426,7 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
             if !near {
                 continue;
             }
-            let likelihood = class_likelihood(tables, &reported, m, &predicted.rows[i].version);
+            let likelihood = class_likelihood(tables, reported, m, &predicted.rows[i].version);
             if likelihood > 0.0 {
                 pairs.push(Pair {
                     j,
@@ -440,12 +440,14 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
     if pairs.is_empty() {
         return Ok(found);
     }
-    // the Mahalanobis gate with the timing noise R' = R + sigma_t^2 v v^T
-    let mut passed: Vec<(Pair, Vec<f64>)> = Vec::with_capacity(pairs.len());
+    // the Mahalanobis gate with the timing noise R' = R + sigma_t^2 v v^T (a pair's own
+    // R' only with timing noise: else the detection's R, not copied)
+    let mut passed: Vec<(Pair, Option<Vec<f64>>)> = Vec::with_capacity(pairs.len());
+    let (mut residual, mut s) = ([0.0; 3], [0.0; 9]);
     for pair in pairs {
         let m = &measurements[pair.j];
-        let mut r = m.r.clone();
-        if timed {
+        let timing = if timed {
+            let mut r = m.r.clone();
             let v = predicted.velocity(pair.i);
             let sigma2 = m.time_std * m.time_std;
             for a in 0..d {
@@ -453,14 +455,22 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
                     r[a * d + b] += sigma2 * v[a] * v[b];
                 }
             }
-        }
+            Some(r)
+        } else {
+            None
+        };
+        let r = timing.as_deref().unwrap_or(&m.r);
         let position = predicted.position(pair.i);
         let covariance = predicted.covariance(pair.i);
-        let residual: Vec<f64> = (0..d).map(|a| m.z[a] - position[a]).collect();
-        let s: Vec<f64> = (0..d * d).map(|k| covariance[k] + r[k]).collect();
-        let d2 = mahalanobis_squared(&residual, &s, d)?;
+        for a in 0..d {
+            residual[a] = m.z[a] - position[a];
+        }
+        for k in 0..d * d {
+            s[k] = covariance[k] + r[k];
+        }
+        let d2 = mahalanobis_squared(&residual[..d], &s[..d * d], d)?;
         if d2 <= tables.gate || pair.labelled {
-            passed.push((pair, r));
+            passed.push((pair, timing));
         }
     }
     // one update batch per filter shape, in order of first appearance
@@ -475,9 +485,10 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
     }
     for (_, members) in shapes {
         for p in members {
-            let (pair, r) = &passed[p];
+            let (pair, timing) = &passed[p];
             let (i, j) = (pair.i, pair.j);
             let m = &measurements[j];
+            let r: &[f64] = timing.as_deref().unwrap_or(&m.r);
             let row = &predicted.rows[i];
             let old = &row.version;
             let (modes, size) = (row.state.modes, row.state.size);
@@ -496,24 +507,26 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
             } else if pair.labelled {
                 log_lik = label_robust(log_lik, inputs, i, &m.z, r)?;
             }
-            let (class_probs, refined): (Vec<f64>, usize) = if mht {
+            let (class_probs, refined): (Arc<[f64]>, usize) = if mht {
                 let reported = classes::likelihood(tables, m.detector, m.cls);
-                let mut posterior: Vec<f64> = old
+                let mut posterior: Arc<[f64]> = old
                     .class_probs
                     .iter()
-                    .zip(&reported)
+                    .zip(reported)
                     .map(|(p, l)| p * l)
                     .collect();
                 let total = numpy_sum(&posterior);
-                for value in &mut posterior {
-                    *value /= total;
+                match Arc::get_mut(&mut posterior) {
+                    Some(values) => values.iter_mut().for_each(|value| *value /= total),
+                    // not reached (made just above, so not shared), but correct if it were
+                    None => posterior = posterior.iter().map(|value| value / total).collect(),
                 }
                 let refined = classes::published(tables, &posterior);
                 (posterior, refined)
             } else {
                 let k = tables.class_count();
                 let refined = tables.most_specific[old.cls * k + m.cls].unwrap_or(old.cls);
-                (classes::point(tables, refined), refined)
+                (classes::point(tables, refined).into(), refined)
             };
             let mut state = FilterState {
                 modes,
@@ -538,7 +551,7 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
                 last_seen: m.time,
                 created: old.created,
                 rate,
-                class_probs: class_probs.into(),
+                class_probs,
                 sources: old.sources_with(&m.source),
             });
             let f_existing = match inputs.detection_rates {

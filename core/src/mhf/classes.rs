@@ -48,17 +48,16 @@ pub fn numpy_sum(values: &[f64]) -> f64 {
 }
 
 /// `L(reported | c)` of `detector` for every class `c` (`K`).
-pub fn likelihood(tables: &Tables, detector: DetectorId, reported: ClassId) -> Vec<f64> {
+pub fn likelihood(tables: &Tables, detector: DetectorId, reported: ClassId) -> &[f64] {
     let k = tables.class_count();
-    let table = &tables.detectors[detector].likelihood;
-    (0..k).map(|c| table[c * k + reported]).collect()
+    &tables.detectors[detector].likelihood[reported * k..(reported + 1) * k]
 }
 
 /// The class distribution of a new object started by a report (`ClassModel.initial`):
 /// the uniform prior over the classes that can appear, times the report's likelihood;
 /// the report itself where no class that can appear explains it.
 pub fn initial(tables: &Tables, detector: DetectorId, reported: ClassId) -> Vec<f64> {
-    let weights: Vec<f64> = likelihood(tables, detector, reported)
+    let mut weights: Vec<f64> = likelihood(tables, detector, reported)
         .iter()
         .zip(&tables.appear_mask)
         .map(|(l, mask)| l * mask)
@@ -67,7 +66,10 @@ pub fn initial(tables: &Tables, detector: DetectorId, reported: ClassId) -> Vec<
     if total <= 0.0 {
         return point(tables, reported);
     }
-    weights.iter().map(|w| w / total).collect()
+    for weight in &mut weights {
+        *weight /= total;
+    }
+    weights
 }
 
 /// A distribution sitting on one class.

@@ -89,7 +89,8 @@ pub struct DetectorSpec {
     pub name: Name,
     /// log of the clutter's spatial density over its coverage (`mht`; 0 without one).
     pub clutter_log_density: f64,
-    /// `K x K`, `[true class][reported class]`: L(reported | true), its confusion model.
+    /// `K x K`, `[reported class][true class]`: L(reported | true), its confusion model
+    /// (a report's likelihoods over the true classes are a row).
     pub likelihood: Vec<f64>,
     /// m, from its sensor (`None`: unbounded).
     pub range: Option<f64>,
