@@ -20,7 +20,12 @@ def test_requests_share_one_connection_and_refusals_carry_the_field_paths(
     knowledge_file: Path,
 ) -> None:
     with running_server(Settings(knowledge=knowledge_file, port=0)) as url, Client(url) as client:
-        assert client.post_detections([cup(1.0)]) == {"applied": 1, "time": 1.0, "ignored": 0, "ignored_detections": []}
+        assert client.post_detections([cup(1.0)]) == {
+            "applied": 1,
+            "time": 1.0,
+            "ignored": 0,
+            "ignored_detections": [],
+        }
         connection = client._connection
         assert client.post_detections([cup(1.1), cup(1.1, 3.0)])["applied"] == 2
         assert client.last_headers["x-semwm-commit"] == "2"
@@ -72,3 +77,25 @@ def test_a_token_is_sent_and_a_bad_url_is_refused(knowledge_file: Path) -> None:
             assert client.post_detections([cup(1.0)])["applied"] == 1
     with pytest.raises(ValueError, match="base_url"):
         Client("127.0.0.1:8000")
+
+
+def test_a_batch_is_sent_as_the_robot_gave_it_bad_values_included(knowledge_file: Path) -> None:
+    """The client's JSON (orjson, else the standard library) carries every value as
+    given: numpy arrays as lists, and a NaN the service refuses, never as an absent
+    value (orjson alone would write it as null, and a null time_std is none at all)."""
+    import json
+
+    import numpy as np
+
+    from semwm.client import encode_json
+
+    batch = [{**cup(1.0), "position": np.array([1.0, 2.0]), "time_std": np.float64(0.01)}]
+    assert json.loads(encode_json({"detections": batch}))["detections"][0]["position"] == [1.0, 2.0]
+    assert b"NaN" in encode_json({"detections": [{**cup(1.0), "time_std": float("nan")}]})
+    assert json.loads(encode_json({"n": 2**70})) == {"n": 2**70}  # beyond orjson's 64 bits
+    with running_server(Settings(knowledge=knowledge_file, port=0)) as url, Client(url) as client:
+        assert client.post_detections(batch)["applied"] == 1
+        with pytest.raises(ServiceError) as refused:
+            client.post_detections([{**cup(1.1), "time_std": float("nan")}])
+        assert refused.value.status == 422
+        assert client.get("/health")["commit"] == 1  # nothing applied
