@@ -14,11 +14,11 @@ import math
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Generic, Literal, Protocol, TypeVar
+from typing import Any, Generic, Literal, Protocol, TypeVar, cast
 
 from pydantic import ValidationError
 
@@ -487,19 +487,23 @@ class WorldService:
         key: str | None = None,
         sensor: dict[str, Any] | None = None,
         wait: bool = True,
+        owned: bool = False,
     ) -> Committed[IngestResult]:
         """Apply ``detections`` whole, or raise :class:`InvalidError`/:class:`ConflictError`.
 
         ``key`` (an idempotency key): a key seen among the recent ones is answered as
         the first time, and nothing is applied again. ``wait`` false: raise
         :class:`WorldBusy` (nothing applied) rather than wait for the world's lock.
+        ``owned``: the dicts are the service's own (made from a request's body), so the
+        journal, the listeners and the model keep them as they are; else each is copied,
+        as the caller may change its dicts afterwards.
         """
         with stage("service"):  # api.stages: the request's time in the service by stage
             self._shed_if_behind()
             with stage("sources"):
                 order = self._scan_order(detections, sensor)
             with self._locked(order, wait):
-                return self._ingest_locked(detections, batch, key, sensor)
+                return self._ingest_locked(detections, batch, key, sensor, owned)
 
     def _shed_if_behind(self) -> None:
         """503 with Retry-After when ``max_waiting`` writes already wait for the world:
@@ -521,6 +525,7 @@ class WorldService:
         batch: bool,
         key: str | None = None,
         sensor: dict[str, Any] | None = None,
+        owned: bool = False,
     ) -> Committed[IngestResult]:
         """:meth:`ingest` with the world's lock held."""
         if key is not None and key in self._recent:
@@ -563,20 +568,24 @@ class WorldService:
             # every detection); the journal keeps their plain form
             placed: list[dict[str, Any]] = []
             values: list[Detection | dict[str, Any]] = []
-            for d in placement.detections:
-                if isinstance(d, Detection):
-                    placed.append(d.to_dict())
-                    values.append(d)
-                else:
-                    plain = dict(d)
-                    placed.append(plain)
-                    values.append(plain)
+            if owned and all(type(d) is dict for d in placement.detections):
+                placed = cast(list[dict[str, Any]], list(placement.detections))
+                values = cast(list[Detection | dict[str, Any]], placed)
+            else:
+                for d in placement.detections:
+                    if isinstance(d, Detection):
+                        placed.append(d.to_dict())
+                        values.append(d)
+                    else:
+                        plain = dict(d)
+                        placed.append(plain)
+                        values.append(plain)
         if sensor is not None:
             _check_sensor(sensor)  # before the journal writes it (issue 30)
         started = time.perf_counter()
         with self._change():
             with stage("sources"):
-                self._check_sources(placed, batch)
+                self._check_sources(placed, batch, placement.counts)
             try:
                 # the record (a copy of every detection) only for hooks that take it
                 hooked = self._hooked(batch_record(placed, sensor)) if self.hooks else nullcontext()
@@ -645,13 +654,7 @@ class WorldService:
         newest = self._model.processed_time
         if newest is None or self._model.hold != 0 or not placement.counts:
             return None
-        times = [
-            t
-            for d in placement.detections
-            if isinstance(t := (d.time if isinstance(d, Detection) else d.get("time")), float | int)
-            and not isinstance(t, bool)
-        ]
-        earliest = min(times, default=math.inf)
+        earliest = placement.earliest
         return newest - earliest if earliest < newest else None
 
     def _refuse_late_if_behind(self, placement: Placement, late: float | None) -> None:
@@ -688,9 +691,12 @@ class WorldService:
             self.sources.late(placement, message)
         raise ConflictError(message)
 
-    def _check_sources(self, detections: Sequence[dict[str, Any]], batch: bool) -> None:
-        """Hold at most ``max_sources`` distinct sources (422 for a new one beyond)."""
-        new = {d["source"] for d in detections if d.get("source")} - self._sources
+    def _check_sources(
+        self, detections: Sequence[dict[str, Any]], batch: bool, sources: Iterable[str | None]
+    ) -> None:
+        """Hold at most ``max_sources`` distinct sources (422 for a new one beyond).
+        ``sources``: the batch's (its placement's counts), found without a pass over it."""
+        new = {s for s in sources if s} - self._sources
         if len(self._sources) + len(new) > self.max_sources:
             first = next(i for i, d in enumerate(detections) if d.get("source") in new)
             raise InvalidError.one(

@@ -156,13 +156,15 @@ class Placement:
     ``detections`` are the batch with placed times, in its order; ``latest`` maps
     each source to its latest placed time in the batch and ``counts`` to how many
     detections it has there; ``moved`` maps each concurrent scan placed in arrival
-    order, ``(source, time)``, to the time it was moved to.
+    order, ``(source, time)``, to the time it was moved to; ``earliest`` is the
+    earliest placed time (``inf`` for none).
     """
 
     detections: tuple[DetectionLike, ...]
     latest: dict[str | None, float] = field(default_factory=dict)
     counts: dict[str | None, int] = field(default_factory=dict)
     moved: dict[tuple[str | None, float], float] = field(default_factory=dict)
+    earliest: float = math.inf
 
 
 def _field(d: DetectionLike, name: str) -> Any:
@@ -295,12 +297,15 @@ class SourceRegistry:
             moved = self._concurrent(placed, newest, tolerance, newest_source)
         if moved:
             placed = [_moved(d, moved) for d in placed]
+            earliest = math.inf
             for d in placed:
                 source = _field(d, "source")
                 time = _field(d, "time")
                 if isinstance(time, float) and source in latest:
                     latest[source] = max(latest[source], time)
-        return Placement(tuple(placed), latest, counts, moved)
+                if isinstance(time, int | float) and not isinstance(time, bool):
+                    earliest = min(earliest, float(time))
+        return Placement(tuple(placed), latest, counts, moved, earliest)
 
     def _place_plain(
         self, detections: Sequence[DetectionLike], now: float | None

@@ -307,7 +307,8 @@ def _ingest(
     options: dict[str, Any] = {} if wait else {"wait": False}  # the default call unchanged
     if accepted.sensor is not None:
         options["sensor"] = accepted.sensor
-    return world.ingest(accepted.detections, accepted.batch, key=key, **options)
+    # the body's dicts, made by parsing it: the service keeps them without a copy
+    return world.ingest(accepted.detections, accepted.batch, key=key, owned=True, **options)
 
 
 def _loc_order(item: dict[str, Any]) -> tuple[int, str]:

@@ -115,6 +115,23 @@ def test_service_listeners_see_applied_changes_in_order(service: WorldService) -
     assert seen[0].seconds > 0
 
 
+def test_listeners_keep_what_was_applied_though_the_caller_changes_its_dicts(
+    service: WorldService,
+) -> None:
+    """A caller's dicts are copied (it may reuse them); a request's own (``owned``, as
+    the routes pass them) are kept as they are, with no copy per detection."""
+    seen: list[WorldChange] = []
+    service.add_listener(seen.append)
+    mine = scene(0.0)
+    service.ingest(mine, batch=True)
+    for d in mine:
+        d["position"] = [99.0, 99.0]
+    assert all(d["position"] != [99.0, 99.0] for d in seen[0].detections)
+    owned = scene(0.5)
+    service.ingest(owned, batch=True, owned=True)
+    assert list(seen[1].detections) == owned and seen[1].detections[0] is owned[0]
+
+
 def test_a_failing_listener_does_not_undo_the_change(service: WorldService) -> None:
     def broken(change: WorldChange) -> None:
         raise RuntimeError("boom")
