@@ -59,8 +59,10 @@ from semwm.sources import (
     Placement,
     SourceRegistry,
     SourceStatus,
+    Span,
     TimeGuard,
     TimeGuardError,
+    plain_span,
 )
 from semwm.team import LocalModel
 from semwm.validation import ClassesHeld
@@ -439,11 +441,17 @@ class WorldService:
             self._summary = self._summarise()
 
     def _scan_order(
-        self, detections: Sequence[Detection | dict[str, Any]], sensor: dict[str, Any] | None
+        self,
+        detections: Sequence[Detection | dict[str, Any]],
+        sensor: dict[str, Any] | None,
+        span: Span | None = None,
     ) -> float:
         """A batch's place among queued ones: its earliest time on the service clock
-        (with today's clock offsets; only the order of entry depends on it)."""
+        (with today's clock offsets; only the order of entry depends on it).
+        ``span``: the batch's :func:`~semwm.sources.plain_span`, if known."""
         earliest: dict[str | None, float] = {}  # per source: placing keeps the order
+        if span is not None:  # a plain batch: every time a finite number
+            earliest = {source: first for source, (first, _, _) in span.items()}
 
         def note(source: str | None, t: Any) -> None:
             # a time the model will refuse (not a number, infinite) does not jump ahead
@@ -452,7 +460,7 @@ class WorldService:
                 if known is None or t < known:
                     earliest[source] = t
 
-        for d in detections:
+        for d in detections if span is None else ():
             if type(d) is dict:  # the common case, without a call per detection
                 source, t = d.get("source"), d.get("time")
                 if type(t) is float and t - t == 0.0:  # finite
@@ -501,9 +509,10 @@ class WorldService:
         with stage("service"):  # api.stages: the request's time in the service by stage
             self._shed_if_behind()
             with stage("sources"):
-                order = self._scan_order(detections, sensor)
+                span = plain_span(detections)  # once: ordering and placing both need it
+                order = self._scan_order(detections, sensor, span)
             with self._locked(order, wait):
-                return self._ingest_locked(detections, batch, key, sensor, owned)
+                return self._ingest_locked(detections, batch, key, sensor, owned, span)
 
     def _shed_if_behind(self) -> None:
         """503 with Retry-After when ``max_waiting`` writes already wait for the world:
@@ -526,8 +535,10 @@ class WorldService:
         key: str | None = None,
         sensor: dict[str, Any] | None = None,
         owned: bool = False,
+        span: Span | None = None,
     ) -> Committed[IngestResult]:
-        """:meth:`ingest` with the world's lock held."""
+        """:meth:`ingest` with the world's lock held (``span``: the batch's
+        :func:`~semwm.sources.plain_span`, if known)."""
         if key is not None and key in self._recent:
             self._recent.move_to_end(key)
             earlier = self._recent[key]
@@ -542,6 +553,7 @@ class WorldService:
                     newest=self._model.processed_time if in_order else None,
                     tolerance=self.order_tolerance,
                     newest_source=self._model.processed_source if in_order else None,
+                    span=span,
                 )
                 if sensor is not None and sensor.get("time") is not None:
                     owner = sensor.get("source", _first_source(detections))

@@ -206,6 +206,37 @@ def _moved(d: DetectionLike, moved: Mapping[tuple[str | None, float], float]) ->
     return {**d, "time": to}
 
 
+Span = dict[str | None, list[float]]
+"""Per source, a batch's earliest and latest time and its count (:func:`plain_span`)."""
+
+
+def plain_span(detections: Sequence[DetectionLike]) -> Span | None:
+    """Per source, the earliest and latest time and the count of a batch of plain dicts
+    with finite numeric times (what placing and ordering it need); ``None`` for any
+    other batch (the general path then says what is wrong)."""
+    span: Span = {}  # source -> [earliest, latest, count]
+    for d in detections:
+        if type(d) is not dict:
+            return None
+        time: Any = d.get("time")
+        kind = type(time)
+        if kind is not float and kind is not int:
+            return None  # bool, str, missing
+        if time - time != 0:
+            return None  # not finite
+        source = d.get("source")
+        known = span.get(source)
+        if known is None:
+            span[source] = [time, time, 1]
+        else:
+            if time < known[0]:
+                known[0] = time
+            elif time > known[1]:
+                known[1] = time
+            known[2] += 1
+    return span
+
+
 _Placed = tuple[list[DetectionLike], dict[str | None, float], dict[str | None, int], float]
 """A batch placed: detections, latest time and count per source, earliest time."""
 
@@ -276,13 +307,15 @@ class SourceRegistry:
         newest: float | None = None,
         tolerance: float = 0.0,
         newest_source: str | None = None,
+        span: Span | None = None,
     ) -> Placement:
         """Put ``detections`` on the service clock and check the time guards; with
         ``tolerance`` > 0, place concurrent scans after ``newest`` (the world's newest
         processed scan time) in arrival order (see the module docstring).
         ``newest_source``: the source of that scan (``""`` for none), when known: a
         scan of the same time whose source sorts after it comes after it in the world's
-        own order (time, then source), so it keeps its time.
+        own order (time, then source), so it keeps its time. ``span``: the batch's
+        :func:`plain_span`, if the caller has it (it is not found again).
 
         Raises
         ------
@@ -290,7 +323,7 @@ class SourceRegistry:
             A placed time breaks a guard; the refusal is counted for its source and
             nothing else changes.
         """
-        plain = self._place_plain(detections, now)
+        plain = self._place_plain(detections, now, span)
         placed, latest, counts, earliest = plain or self._place_each(detections, now)
         moved: dict[tuple[str | None, float], float] = {}
         if tolerance > 0.0 and newest is not None and earliest <= newest:
@@ -308,32 +341,20 @@ class SourceRegistry:
         return Placement(tuple(placed), latest, counts, moved, earliest)
 
     def _place_plain(
-        self, detections: Sequence[DetectionLike], now: float | None
+        self,
+        detections: Sequence[DetectionLike],
+        now: float | None,
+        span: Span | None = None,
     ) -> _Placed | None:
         """:meth:`_place_each`'s result for the common batch, computed per source: plain
         dicts with finite numeric times from sources that are not synced (their times
         stay as stamped) and that pass the guards. The guards grow with the time, so
-        each source's latest time decides them. ``None`` for any other batch."""
-        span: dict[str | None, list[float]] = {}  # source -> [earliest, latest, count]
-        for d in detections:
-            if type(d) is not dict:
+        each source's latest time decides them. ``None`` for any other batch.
+        ``span``: the batch's :func:`plain_span`, if the caller has it."""
+        if span is None:
+            span = plain_span(detections)
+            if span is None:
                 return None
-            time = d.get("time")
-            kind = type(time)
-            if kind is not float and kind is not int:
-                return None  # bool, str, missing: the general path says what is wrong
-            if time - time != 0:  # type: ignore[operator]
-                return None  # not finite
-            source = d.get("source")
-            known = span.get(source)
-            if known is None:
-                span[source] = [time, time, 1]  # type: ignore[list-item]
-            else:
-                if time < known[0]:  # type: ignore[operator]
-                    known[0] = time  # type: ignore[assignment]
-                elif time > known[1]:  # type: ignore[operator]
-                    known[1] = time  # type: ignore[assignment]
-                known[2] += 1
         for index, (source, (_, last, _)) in enumerate(span.items()):
             record = self._records.get(source)
             if record is not None and record.clock.synced:
