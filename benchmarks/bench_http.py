@@ -39,11 +39,12 @@ over to an ingest thread, lock (waiting for the world), sources, save, model
 (``WorldModel.ingest``), notify, service, respond (the answer's JSON and send), gc (the
 garbage collector, wherever it ran). In the
 servers this benchmark starts, ``WorldModel.ingest`` is split further
-(:func:`model_timers`): validate (``parse`` and ``check``: the detections against the
-knowledge), core (``_process``: the MHF scan, the confidences, the reorder log),
-publish (``_publish``: ids and the published world), and what is left of ``ingest``
-(each detection's range and region check, the time bounds), counted with validate
-(the knowledge checks). Outside the app: the client's time minus
+(:func:`model_timers`): validate (``_read``: the detections parsed and checked
+against the knowledge, each one's range and region checked; with the Rust engine a
+plain batch in one pass of the core's reader), core (``_process_scans``: the MHF scan,
+the confidences, the reorder log), publish (``_publish``: ids and the published
+world), and what is left of ``ingest`` (grouping into scans, the time bounds), counted
+with validate. Outside the app: the client's time minus
 ``semwm_ingest_latency_seconds`` (the client's JSON, the loopback, uvicorn's HTTP
 parsing); middlewares: that latency minus the stages (the guards, request ids, the
 metrics middleware). In process the same timers split ``ingest`` on the same requests
@@ -129,16 +130,16 @@ def _timed(function: Callable[..., Any], name: str) -> Callable[..., Any]:
 @contextmanager
 def model_timers() -> Iterator[None]:
     """Within: ``WorldModel.ingest``'s parts are stages of the request being timed
-    (:mod:`api.stages`): ``validate`` (``semwm.world.parse`` and ``check``), ``core``
-    (``WorldModel._process``) and ``publish`` (``WorldModel._publish``). Four stages of
-    a microsecond or less per ``ingest`` (hold 0: one ``_process`` and one
-    ``_publish``); outside a timed request they cost a no-op each."""
+    (:mod:`api.stages`): ``validate`` (``WorldModel._read``: the batch parsed, checked
+    against the knowledge and each detection's range and region checked, or the Rust
+    engine's reader doing all that in one pass), ``core`` (``WorldModel._process_scans``)
+    and ``publish`` (``WorldModel._publish``). Three stages of a microsecond or less per
+    ``ingest`` (hold 0: one of each); outside a timed request they cost a no-op each."""
     import semwm.world as world
 
     patched: list[tuple[Any, str, Any]] = [
-        (world, "parse", "validate"),
-        (world, "check", "validate"),
-        (world.WorldModel, "_process", "core"),
+        (world.WorldModel, "_read", "validate"),
+        (world.WorldModel, "_process_scans", "core"),
         (world.WorldModel, "_publish", "publish"),
     ]
     originals = [(owner, attribute, getattr(owner, attribute)) for owner, attribute, _ in patched]
@@ -162,11 +163,11 @@ def serve(argv: Sequence[str]) -> int:
 
 def timers_cost(loops: int = 2000, rounds: int = 5) -> dict[str, Any]:
     """What the stage timers cost a request (CPU µs, the best of ``rounds``): a timed
-    request's stages as the service (13) and :func:`model_timers` (4) time a one-scan
+    request's stages as the service (13) and :func:`model_timers` (3) time a one-scan
     batch, their sums added, and the same stages outside a timed request."""
     names = (
         "read", "parse", "service", "sources", "lock", "sources", "save", "sources",
-        "model", "validate", "validate", "core", "publish", "notify", "sources", "notify",
+        "model", "validate", "core", "publish", "notify", "sources", "notify",
         "respond",
     )  # fmt: skip
     totals = timing.StageTotals()
@@ -190,7 +191,7 @@ def timers_cost(loops: int = 2000, rounds: int = 5) -> dict[str, Any]:
 
     return {
         "stages": len(names),
-        "service_stages": len(names) - 4,
+        "service_stages": len(names) - 3,
         "timed_us_per_request": cpu_us(timed),
         "untimed_us_per_request": cpu_us(untimed),
     }
@@ -840,7 +841,8 @@ def markdown(doc: dict[str, Any]) -> str:
             "",
             f"The timers themselves (CPU, measured in this run, best of 5 x 2,000): "
             f"{cost['stages']} stages of a request ({cost['service_stages']} the service's, "
-            f"4 this benchmark's in its servers) cost {fmt(cost['timed_us_per_request'])} µs "
+            f"{cost['stages'] - cost['service_stages']} this benchmark's in its servers) cost "
+            f"{fmt(cost['timed_us_per_request'])} µs "
             f"when the request is timed (`stage_timing` on), "
             f"{fmt(cost['untimed_us_per_request'])} µs when not (the default).",
         ]

@@ -524,15 +524,9 @@ class WorldModel:
         sensor: SensorReport | Mapping[str, Any] | None,
     ) -> IngestResult:
         batch = as_batch(detections)
-        read = self._reader.read(batch, self._seq) if self._reader is not None else None
-        if read is None:  # the specification: parse, check against the knowledge, place
-            parsed = parse(batch)
-            measurements = check(parsed, self._knowledge, self._mhf.factory, self._seq)
-            used, skipped = self._placed(parsed, measurements)
-        else:  # every detection plain, used as read
-            measurements = used = read
-            skipped = []
+        measurements, used, skipped, scans = self._read(batch)
         view = self._view(sensor, measurements) if sensor is not None else None
+        grouped = (scans, {}) if scans is not None and view is None else _grouped(used, view)
         ignored = len(skipped)
         latest = self._state.time
         times = [m.time for m in used] + ([view.time] if view is not None else [])
@@ -550,11 +544,10 @@ class WorldModel:
             self._newest = newest if self._newest is None else max(self._newest, newest)
             self._earliest = earliest if self._earliest is None else min(self._earliest, earliest)
         if self._hold > 0 and (used or view is not None):
-            self._hold_scans(*_grouped(used, view))
-        else:
-            self._commit(*self._process(used, view))
-            if used or view is not None:
-                self._publish()
+            self._hold_scans(*grouped)
+        elif used or view is not None:
+            self._commit(*self._process_scans(*grouped))
+            self._publish()
         self._seq += len(batch)
         return IngestResult(
             applied=len(used),
@@ -562,6 +555,28 @@ class WorldModel:
             ignored=ignored,
             ignored_detections=tuple(skipped),
         )
+
+    def _read(self, batch: list[DetectionInput]) -> tuple[
+        list[Measurement],
+        list[Measurement],
+        list[IgnoredDetection],
+        dict[ScanKey, list[Measurement]] | None,
+    ]:
+        """A batch's measurements, those used, why each other detection is not, and the
+        used ones by scan if the Rust engine's reader read the batch (else ``None``).
+
+        The specification: :func:`~semwm.validation.parse`, then
+        :func:`~semwm.validation.check` against the knowledge (raises
+        ``DetectionError``), then :meth:`_placed`. The Rust engine's reader gives the
+        same for a batch of plain detections in one pass, grouped as :func:`_grouped`
+        groups them (docs/engines.md, "The boundary")."""
+        read = self._reader.read(batch, self._seq) if self._reader is not None else None
+        if read is not None:  # every detection plain: all used
+            return read[0], read[0], [], read[1]
+        parsed = parse(batch)
+        measurements = check(parsed, self._knowledge, self._mhf.factory, self._seq)
+        used, skipped = self._placed(parsed, measurements)
+        return measurements, used, skipped, None
 
     def _placed(
         self, parsed: list[Detection], measurements: list[Measurement]
@@ -844,21 +859,14 @@ class WorldModel:
             frozenset(by_id[i] for i in report.looking_at),
         )
 
-    def _process(
-        self, measurements: Sequence[Measurement], view: SensorView | None = None
-    ) -> tuple[StateView, list[_LoggedScan], BookView, _Floor | None]:
-        """Process new scans in time order, replaying logged scans they precede.
-
-        Returns the new state, reorder log and confidences, and the log's replay floor
-        (raised past the newest scan dropped to keep it within :attr:`max_reorder_scans`)."""
-        if not measurements and view is None:
-            return self._state, self._log, self._book, self._replay_floor
-        return self._process_scans(*_grouped(measurements, view))
-
     def _process_scans(
         self, scans: dict[ScanKey, list[Measurement]], views: dict[ScanKey, SensorView]
     ) -> tuple[StateView, list[_LoggedScan], BookView, _Floor | None]:
-        """:meth:`_process` of scans grouped by key (``scans`` not empty; changed here)."""
+        """Process new scans, grouped by key (:func:`_grouped`; ``scans`` not empty and
+        changed here), in time order, replaying logged scans they precede.
+
+        Returns the new state, reorder log and confidences, and the log's replay floor
+        (raised past the newest scan dropped to keep it within :attr:`max_reorder_scans`)."""
         first = min(scans)
         # the first logged scan at or after ``first`` (the log is in key order; a new
         # scan usually comes after all of it)

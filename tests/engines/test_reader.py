@@ -24,7 +24,7 @@ from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.mhf.measurement import Measurement
 from semwm.validation import as_batch, check, core_reader, parse
-from semwm.world import WorldModel
+from semwm.world import WorldModel, _grouped
 
 from . import needs_rust
 
@@ -54,7 +54,8 @@ def detections(draw: st.DrawFn, knowledge: Any) -> tuple[Any, bool]:
         near[axis] = (high if draw(edge) > 0 else low) + draw(st.floats(-2.5, 2.5))
         odd = True
     item: dict[str, Any] = {
-        "time": draw(st.floats(-100.0, 100.0)),
+        # a few times shared across a batch (scans of several detections, and sources)
+        "time": draw(st.one_of(st.sampled_from([0.0, -0.0, 1.5]), st.floats(-100.0, 100.0))),
         "class": draw(st.sampled_from(sorted(knowledge.classes))),
         "position": near,
     }
@@ -136,17 +137,30 @@ def test_the_reader_makes_what_the_specification_makes(knowledge: Any, data: Any
     drawn = data.draw(st.lists(detections(knowledge), min_size=1, max_size=4))
     batch = [item for item, _ in drawn]
     first_seq = data.draw(st.integers(0, 10**6))
-    read = reader.read(batch, first_seq)
+    answer = reader.read(batch, first_seq)
     expected = _specification(model, batch, first_seq)
-    if read is None:
+    if answer is None:
         assert any(odd for _, odd in drawn), f"a plain batch was given back: {batch}"
         return
+    read, scans = answer
     assert expected is not None, "the reader took a batch the specification refuses"
     used, ignored = expected
     assert ignored == 0, "the reader took a batch the specification ignores part of"
     assert len(read) == len(used)
     for a, b in zip(read, used, strict=True):
         _same(a, b)
+    _same_scans(scans, read)
+
+
+def _same_scans(scans: dict[Any, list[Measurement]], read: list[Measurement]) -> None:
+    """The reader's scans are :func:`semwm.world._grouped`'s: the same keys, of the same
+    types, in the same order, each holding the same measurements in batch order."""
+    expected, _ = _grouped(read, None)
+    assert list(scans) == list(expected)
+    assert [tuple(map(type, key)) for key in scans] == [tuple(map(type, k)) for k in expected]
+    for key, group in expected.items():
+        assert [m.seq for m in scans[key]] == [m.seq for m in group]
+        assert all(a is b for a, b in zip(scans[key], group, strict=True))
 
 
 def test_a_plain_batch_of_either_form_is_read() -> None:
@@ -161,8 +175,10 @@ def test_a_plain_batch_of_either_form_is_read() -> None:
              "detector": "self_localization", "sensor_position": [0.5, 0.4]}
         ),
     ]  # fmt: skip
-    read = reader.read(batch, 7)
-    assert read is not None
+    answer = reader.read(batch, 7)
+    assert answer is not None
+    read, scans = answer
+    assert list(scans) == [(1.0, "")] and scans[1.0, ""] == read  # one scan, no source
     assert [m.seq for m in read] == [7, 8]
     assert [m.label for m in read] == [None, "me"]
     assert read[1].detector == "self_localization" and read[0].detector == "omnivision"

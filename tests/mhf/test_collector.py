@@ -61,13 +61,13 @@ def test_a_collector_disabled_before_stays_disabled() -> None:
 def test_ingest_processes_with_the_collector_paused_even_when_it_refuses() -> None:
     model = WorldModel(load_knowledge(shipped_knowledge_path("sim1.yaml")))
     during: list[bool] = []
-    process = model._process
+    process = model._process_scans
 
     def watched(*args: object, **kwargs: object) -> object:
         during.append(gc.isenabled())
         return process(*args, **kwargs)  # type: ignore[arg-type]
 
-    model._process = watched  # type: ignore[method-assign]
+    model._process_scans = watched  # type: ignore[method-assign]
     model.ingest([{"time": 1.0, "class": "Cup", "position": [1.0, 1.0]}])
     assert during == [False] and gc.isenabled()
     with pytest.raises(DetectionError):

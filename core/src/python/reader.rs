@@ -9,7 +9,8 @@
 //! only known fields, values of their exact types within the `Detection` model's
 //! bounds, a known class and detector, no covariance of its own, a position and sensor
 //! position of the world's dimension, within its detector's reach and the region's
-//! bounds — the reader makes the same measurements in one pass. For any other batch it
+//! bounds — the reader makes the same measurements in one pass, and groups them by
+//! scan as `semwm.world._grouped` does. For any other batch it
 //! answers `None`, and the batch takes the specification's path, which reports every
 //! problem and every detection it ignores. `tests/engines/test_reader.py` holds the two
 //! paths equal.
@@ -113,6 +114,23 @@ fn name<'a, 'py>(
     }
 }
 
+/// A detection read: its `Measurement` and its scan's time and source.
+struct Read<'py> {
+    measurement: Bound<'py, PyAny>,
+    time: Bound<'py, PyAny>,
+    source: Option<Bound<'py, PyString>>,
+}
+
+impl Read<'_> {
+    /// `m.source or ""`, the scan key's source.
+    fn source_text(&self) -> PyResult<&str> {
+        match &self.source {
+            Some(source) => source.to_str(),
+            None => Ok(""),
+        }
+    }
+}
+
 #[pyclass(name = "DetectionReader", module = "semwm._core", frozen)]
 pub struct PyDetectionReader {
     measurement: Py<PyType>,
@@ -128,13 +146,14 @@ pub struct PyDetectionReader {
 }
 
 impl PyDetectionReader {
-    /// One plain detection as its `Measurement`, or `None`.
+    /// One plain detection as its `Measurement` with its scan's key (time, source), or
+    /// `None`.
     fn read_one<'py>(
         &self,
         py: Python<'py>,
         item: &Bound<'py, PyAny>,
         seq: u64,
-    ) -> PyResult<Option<Bound<'py, PyAny>>> {
+    ) -> PyResult<Option<Read<'py>>> {
         let fields = if let Ok(dict) = item.cast_exact::<PyDict>() {
             Fields::of(dict, "class")?
         } else if item.get_type().is(self.detection.bind(py)) {
@@ -224,11 +243,15 @@ impl PyDetectionReader {
             time_std,
         ];
         let fields = PyTuple::new(py, values)?;
-        Ok(Some(
-            self.tuple_new
-                .bind(py)
-                .call1((self.measurement.bind(py), fields))?,
-        ))
+        let measurement = self
+            .tuple_new
+            .bind(py)
+            .call1((self.measurement.bind(py), fields))?;
+        Ok(Some(Read {
+            measurement,
+            time: time.clone(),
+            source: source.cloned(),
+        }))
     }
 }
 
@@ -283,21 +306,50 @@ impl PyDetectionReader {
         })
     }
 
-    /// The batch's measurements (sequence numbers from `first_seq`), or `None` when a
-    /// detection is not plain: the specification reads that batch.
+    /// The batch's measurements (sequence numbers from `first_seq`) and the same
+    /// grouped by scan as `semwm.world._grouped` groups them (key `(time, source or
+    /// "")`, in order of first appearance), or `None` when a detection is not plain:
+    /// the specification reads that batch.
+    #[allow(clippy::type_complexity)]
     fn read<'py>(
         &self,
         py: Python<'py>,
         batch: &Bound<'py, PyList>,
         first_seq: u64,
-    ) -> PyResult<Option<Bound<'py, PyList>>> {
+    ) -> PyResult<Option<(Bound<'py, PyList>, Bound<'py, PyDict>)>> {
         let measurements = PyList::empty(py);
+        let scans = PyDict::new(py);
+        // the scan of the previous detection: a batch's detections come in runs
+        let mut current: Option<(Read<'py>, Bound<'py, PyList>)> = None;
         for (index, item) in batch.iter().enumerate() {
-            match self.read_one(py, &item, first_seq + index as u64)? {
-                Some(measurement) => measurements.append(measurement)?,
-                None => return Ok(None),
+            let Some(read) = self.read_one(py, &item, first_seq + index as u64)? else {
+                return Ok(None);
+            };
+            measurements.append(&read.measurement)?;
+            if let Some((last, scan)) = &current {
+                let same_time = last.time.cast_exact::<PyFloat>()?.value()
+                    == read.time.cast_exact::<PyFloat>()?.value();
+                if same_time && last.source_text()? == read.source_text()? {
+                    scan.append(&read.measurement)?;
+                    continue;
+                }
             }
+            let source = match &read.source {
+                Some(source) if !source.to_str()?.is_empty() => source.clone(),
+                _ => intern!(py, "").clone(),
+            };
+            let key = PyTuple::new(py, [read.time.clone(), source.into_any()])?;
+            let scan = match scans.get_item(&key)? {
+                Some(scan) => scan.cast_into::<PyList>()?,
+                None => {
+                    let scan = PyList::empty(py);
+                    scans.set_item(&key, &scan)?;
+                    scan
+                }
+            };
+            scan.append(&read.measurement)?;
+            current = Some((read, scan));
         }
-        Ok(Some(measurements))
+        Ok(Some((measurements, scans)))
     }
 }
