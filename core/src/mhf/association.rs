@@ -324,18 +324,17 @@ fn class_likelihood(tables: &Tables, reported: &[f64], m: &Measurement, version:
     }
 }
 
-/// The objects (rows) a detection at `z` may pair with, ascending: those whose first
+/// The objects (rows) a detection at `z` may pair with, in no order: those whose first
 /// coordinate lies within `radius` of `z`'s (`order` sorts the rows by it, `first`
 /// holds the sorted coordinates). A superset of the pairs the cheap bound passes (its
 /// radius is the largest that bound allows), so the exact test decides as the
-/// specification's dense test does, in its row-major order.
+/// specification's dense test does; the pairs it passes are then put in row order.
 fn window(order: &[usize], first: &[f64], z: f64, radius: f64, out: &mut Vec<usize>) {
     out.clear();
     let reach = radius * (1.0 + 1e-9) + 1e-12;
     let low = first.partition_point(|&x| x < z - reach);
     let high = first.partition_point(|&x| x <= z + reach);
     out.extend_from_slice(&order[low..high]);
-    out.sort_unstable();
 }
 
 /// Gates every (detection, object) pair and updates the pairs that pass
@@ -391,6 +390,7 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
         } else {
             &[]
         };
+        let first_of_row = pairs.len();
         let dense = !gated || (has_labels && m.label.is_some());
         if dense {
             rows.clear();
@@ -436,6 +436,8 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
                 });
             }
         }
+        // row-major order: a window's rows came by coordinate (a few pass; sort those)
+        pairs[first_of_row..].sort_unstable_by_key(|pair| pair.i);
     }
     if pairs.is_empty() {
         return Ok(found);
