@@ -138,15 +138,22 @@ pub fn current(
         return Vec::new();
     }
     let floor = tables.min_existence;
+    // sized once: at most one entry per stored version (no rehash as they fill)
+    let versions = state.tracks.len();
     let mut summaries: KeyMap<Key, Summary> = KeyMap::default();
-    let mut totals: Vec<(u64, f64)> = Vec::new();
+    summaries.reserve(versions);
+    let mut totals: Vec<(u64, f64)> = Vec::with_capacity(versions);
     let mut total_at: KeyMap<u64, usize> = KeyMap::default();
+    total_at.reserve(versions);
     let mut chosen: KeyMap<u64, Key> = KeyMap::default();
+    chosen.reserve(versions);
     let mut present_in: KeySet<u64> = KeySet::default();
+    present_in.reserve(versions);
     for cluster in &state.clusters {
         // each version's probability mass, in order of first appearance
-        let mut mass: Vec<(Key, f64)> = Vec::new();
+        let mut mass: Vec<(Key, f64)> = Vec::with_capacity(cluster.keys.len());
         let mut mass_at: KeyMap<Key, usize> = KeyMap::default();
+        mass_at.reserve(cluster.keys.len());
         for h in &cluster.hypotheses {
             let p = h.log_weight.exp();
             for &key in &h.keys {

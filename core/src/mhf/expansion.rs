@@ -358,7 +358,7 @@ pub fn product(
         } else {
             f64::NEG_INFINITY
         };
-        let mut merged = Merged::new();
+        let mut merged = Merged::with_capacity((result.len() * hypotheses.len()).min(256));
         for a in &result {
             for b in &hypotheses {
                 let log_weight = a.log_weight + b.log_weight;
@@ -425,7 +425,7 @@ pub fn split_with(
         for &key in &common {
             common_rate += rate(key)?;
         }
-        let mut merged = Merged::new();
+        let mut merged = Merged::with_capacity(hypotheses.len());
         for h in hypotheses {
             let keys: Vec<u64> = h.keys.into_iter().filter(|&k| !holds(&common, k)).collect();
             merged.add(keys, h.log_weight, h.rate - common_rate);
@@ -589,7 +589,8 @@ fn expand(
     let log_or_clutter = log_add(log_clutter, option.new_log); // the usual "new or clutter"
     let floor = update_floor(&hypotheses, option, !copies.is_empty(), settings);
     let mut born_at: KeyMap<u64, u64> = KeyMap::default(); // birth weight -> version (mht)
-    let mut children = Merged::new();
+                                                           // each hypothesis's children: clutter or new, and each update it allows
+    let mut children = Merged::with_capacity(hypotheses.len() * (2 + option.existing.len()));
     for h in &hypotheses {
         let keys = &h.keys;
         let (mut birth_rate, mut birth_log) = (option.new_rate, option.new_log);

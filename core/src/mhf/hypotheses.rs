@@ -246,6 +246,17 @@ impl Merged {
         Merged::default()
     }
 
+    /// Room for `children` distinct entries without growing.
+    pub fn with_capacity(children: usize) -> Merged {
+        let mut index = KeyMap::default();
+        index.reserve(children);
+        Merged {
+            index,
+            next: Vec::with_capacity(children),
+            entries: Vec::with_capacity(children),
+        }
+    }
+
     /// Adds a child: a new entry for a new set of objects, else its probability added
     /// to the entry's (the entry keeps its first rate).
     pub fn add(&mut self, keys: Vec<u64>, log_weight: f64, rate: f64) {
@@ -290,7 +301,8 @@ impl Merged {
 
 /// `merge`: children that hold the same objects merged.
 pub fn merge(children: impl IntoIterator<Item = Hypothesis>) -> Merged {
-    let mut merged = Merged::new();
+    let children = children.into_iter();
+    let mut merged = Merged::with_capacity(children.size_hint().0);
     for child in children {
         merged.add(child.keys, child.log_weight, child.rate);
     }
