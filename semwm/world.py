@@ -227,17 +227,13 @@ def _view_key(view: SensorView) -> ScanKey:
     return (view.time, view.source or "")
 
 
-def _scan_key(m: Measurement) -> ScanKey:
-    return (m.time, m.source or "")
-
-
 def _grouped(
     measurements: Sequence[Measurement], view: SensorView | None
 ) -> tuple[dict[ScanKey, list[Measurement]], dict[ScanKey, SensorView]]:
     """A batch's detections by scan (time, source), and its sensor view by scan."""
     scans: dict[ScanKey, list[Measurement]] = {}
     views: dict[ScanKey, SensorView] = {}
-    for m in measurements:  # _scan_key, inline (once per detection)
+    for m in measurements:  # the key (time, source or ""), inline: once per detection
         key = (m.time, m.source or "")
         group = scans.get(key)
         if group is None:
@@ -529,15 +525,16 @@ class WorldModel:
         grouped = (scans, {}) if scans is not None and view is None else _grouped(used, view)
         ignored = len(skipped)
         latest = self._state.time
-        times = [m.time for m in used] + ([view.time] if view is not None else [])
+        # the batch's scans (its used detections' and its view's): their times are the
+        # batch's times, found once per scan rather than per detection
+        keys = grouped[0]
+        times = [key[0] for key in keys]
         if times and latest is not None:
             earliest = min(times)
             if earliest < latest - self.reorder_window - 1e-12:
                 raise OutOfOrderError(earliest, latest, self.reorder_window)
             floor = self._replay_floor
-            if floor is not None and min(
-                [_scan_key(m) for m in used] + ([_view_key(view)] if view is not None else [])
-            ) <= floor[0]:
+            if floor is not None and min(keys) <= floor[0]:
                 raise OutOfOrderError(earliest, latest, latest - floor[0][0], why=floor[1])
         if times:
             newest, earliest = max(times), min(times)
