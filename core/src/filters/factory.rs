@@ -158,6 +158,9 @@ impl ClassTables {
         let mut x0 = vec![0.0; m * n];
         let mut p0 = vec![0.0; m * nn];
         let mut cbar = [0.0; MAX_MODES];
+        // the step's transition and models, kept for the next row of the same step (the
+        // rows a scan predicts mostly share a few steps); the decay rewrites F per row
+        let mut made_for: Option<f64> = None;
         for (i, &step) in dt.iter().enumerate() {
             if step.is_nan() || step <= 0.0 {
                 continue;
@@ -165,8 +168,11 @@ impl ClassTables {
             let xi = &mut x[i * m * n..(i + 1) * m * n];
             let pi = &mut p[i * m * nn..(i + 1) * m * nn];
             let mui = &mut mu[i * m..(i + 1) * m];
-            self.transition_for(step, &mut t[..m * m]);
-            self.mode_models(step, &mut f, &mut q);
+            if decaying || made_for != Some(step) {
+                self.transition_for(step, &mut t[..m * m]);
+                self.mode_models(step, &mut f, &mut q);
+                made_for = Some(step);
+            }
             imm_mix(
                 xi,
                 pi,
