@@ -18,7 +18,7 @@ import math
 from bisect import bisect_left, bisect_right
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from operator import attrgetter
 from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
 
@@ -131,13 +131,15 @@ class _Marginal(NamedTuple):
     row: int
 
 
-@dataclass(frozen=True)
-class _LoggedScan:
+class _LoggedScan(NamedTuple):
+    """A processed scan in the reorder log, with the state and confidences before it (a
+    named tuple: one is made per scan)."""
+
     key: ScanKey
     measurements: tuple[Measurement, ...]
     before: StateView
-    view: SensorView | None = None
-    book: BookView = field(default_factory=ConfidenceBook)
+    view: SensorView | None
+    book: BookView
 
 
 _log_key = attrgetter("key")
@@ -882,14 +884,16 @@ class WorldModel:
             if logged.view is not None and logged.key not in views:
                 views[logged.key] = logged.view
         log = self._log[:start]
+        keep = self.reorder_window > 0  # else nothing is kept for a replay
         for key in sorted(scans):
             before, before_book = state, book
             scan_view = views.get(key)
             state, book = self._step(state, book, scans[key], scan_view)
-            log.append(_LoggedScan(key, tuple(scans[key]), before, scan_view, before_book))
+            if keep:
+                log.append(_LoggedScan(key, tuple(scans[key]), before, scan_view, before_book))
         assert state.time is not None
         horizon = state.time - self.reorder_window
-        if self.reorder_window > 0:  # the log is in key (time) order: drop its head
+        if keep:  # the log is in key (time) order: drop its head
             cut = 0
             while cut < len(log) and log[cut].key[0] < horizon:
                 cut += 1
