@@ -980,11 +980,12 @@ def markdown(doc: dict[str, Any]) -> str:
         "",
         "## Where the time goes: `WorldModel.ingest` by stage, without a profiler",
         "",
-        "µs per detection (`bench_http.model_timers`): validate (`parse`, `check`: the "
-        "detections against the knowledge), core (`_process`: the MHF scan, the confidences, "
-        "the reorder log; the Rust engine's scan runs in the core), publish (`_publish`: "
-        "ids and the published world), the rest of `ingest` (each detection's range and "
-        "region check, the time bounds).",
+        "µs per detection (`bench_http.model_timers`): validate (`_read`: `parse`, `check` "
+        "and each detection's range and region check; with the Rust engine a plain batch in "
+        "one pass of the core's reader), core (`_process_scans`: the MHF scan, the "
+        "confidences, the reorder log; the Rust engine's scan runs in the core), publish "
+        "(`_publish`: ids and the published world), the rest of `ingest` (grouping into "
+        "scans, the time bounds).",
         "",
         "| workload | engine | validate | core | publish | rest | whole ingest |",
         "|---|---|---|---|---|---|---|",
