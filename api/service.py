@@ -580,7 +580,8 @@ class WorldService:
             # every detection); the journal keeps their plain form
             placed: list[dict[str, Any]] = []
             values: list[Detection | dict[str, Any]] = []
-            if owned and all(type(d) is dict for d in placement.detections):
+            # a plain span: every detection a dict (placing keeps them dicts)
+            if owned and (span is not None or all(type(d) is dict for d in placement.detections)):
                 placed = cast(list[dict[str, Any]], list(placement.detections))
                 values = cast(list[Detection | dict[str, Any]], placed)
             else:
