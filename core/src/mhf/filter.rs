@@ -407,7 +407,11 @@ impl Filter {
         }
         ScanCoverage {
             source: first.source.clone(),
-            positions: measurements.iter().map(|m| m.z.clone()).collect(),
+            positions: measurements
+                .iter()
+                .flat_map(|m| m.z.iter().copied())
+                .collect(),
+            dim: self.tables.dim,
             sensor,
             reach,
             fixed,

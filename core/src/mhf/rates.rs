@@ -365,8 +365,15 @@ impl ObservedRates {
             .cloned()
             .collect();
         for (detector, lineages) in scan.detected.iter().chain(scan.born.iter()) {
+            // a scan's detections mostly share their class: its key once, not per object
+            let mut last: Option<Name> = None;
             for &lineage in lineages {
-                keys.insert((source.clone(), detector.clone(), class_of(lineage)));
+                let cls = class_of(lineage);
+                if last.as_ref().is_some_and(|known| Arc::ptr_eq(known, &cls)) {
+                    continue; // the same name: the key is in
+                }
+                keys.insert((source.clone(), detector.clone(), cls.clone()));
+                last = Some(cls);
             }
         }
         let nothing = Vec::new();
@@ -430,7 +437,10 @@ impl ObservedRates {
                 }
                 let entry = seen.entry(lineage).or_default();
                 let streams = Arc::make_mut(entry);
-                match streams.iter_mut().find(|(s, _)| *s == stream) {
+                let same = |s: &StreamKey| {
+                    (Arc::ptr_eq(&s.0, &stream.0) && Arc::ptr_eq(&s.1, &stream.1)) || *s == stream
+                };
+                match streams.iter_mut().find(|(s, _)| same(s)) {
                     Some((_, at)) => *at = time,
                     None => streams.push((stream.clone(), time)),
                 }
@@ -474,7 +484,9 @@ impl ObservedRates {
 #[derive(Debug, Clone)]
 pub struct ScanCoverage {
     pub source: Name,
-    pub positions: Vec<Vec<f64>>,
+    /// `M x dim`, row-major: one row per detection.
+    pub positions: Vec<f64>,
+    pub dim: usize,
     pub sensor: Option<Vec<f64>>,
     pub reach: Option<f64>,
     pub fixed: bool,
@@ -526,19 +538,25 @@ pub fn watched(scan: &ScanCoverage, objects: &[WatchedObject<'_>]) -> Vec<f64> {
         return vec![0.0; count];
     }
     let mut near = vec![false; count];
-    if let Some(first) = scan.positions.first() {
+    if !scan.positions.is_empty() && scan.dim > 0 {
         let rows: Vec<usize> = (0..count).filter(|&i| by_source[i]).collect();
-        let d = objects[0].position.len().min(first.len());
+        let d = objects[0].position.len().min(scan.dim);
         let points: Vec<f64> = rows
             .iter()
             .flat_map(|&i| objects[i].position[..d].iter().copied())
             .collect();
-        let corners: Vec<f64> = scan
-            .positions
-            .iter()
-            .flat_map(|p| p[..d].iter().copied())
-            .collect();
-        let distances = crate::mhf::coverage::hull_distance(&points, &corners, d);
+        let cut: Vec<f64>;
+        let corners: &[f64] = if d == scan.dim {
+            &scan.positions
+        } else {
+            cut = scan
+                .positions
+                .chunks(scan.dim)
+                .flat_map(|p| p[..d].iter().copied())
+                .collect();
+            &cut
+        };
+        let distances = crate::mhf::coverage::hull_distance(&points, corners, d);
         for (&i, distance) in rows.iter().zip(distances) {
             near[i] = distance <= objects[i].radius;
         }
