@@ -489,9 +489,11 @@ impl Filter {
         };
         let inside = self.inside(&predicted);
         let (existence, log_q) = self.existence_at(state, &predicted, time, scan.as_ref(), &inside);
+        // the predicted versions and, about, one updated version per detection
+        let stored = predicted.len() + 2 * measurements.len();
         let mut table = Table {
-            versions: KeyMap::default(),
-            existence: KeyMap::default(),
+            versions: KeyMap::with_capacity_and_hasher(stored, Default::default()),
+            existence: KeyMap::with_capacity_and_hasher(stored, Default::default()),
         };
         for (row, &r) in predicted.rows.iter().zip(&existence) {
             table.add(row.version.clone(), r);
@@ -750,8 +752,10 @@ impl Filter {
                 *labels.entry(l.clone()).or_insert(next)
             })
         };
-        let mut fresh: KeySet<Key> = KeySet::default();
-        let mut new_versions: KeyMap<Key, Arc<Version>> = KeyMap::default();
+        let mut fresh: KeySet<Key> =
+            KeySet::with_capacity_and_hasher(options.len(), Default::default());
+        let mut new_versions: KeyMap<Key, Arc<Version>> =
+            KeyMap::with_capacity_and_hasher(options.len(), Default::default());
         let mut scan_options = Vec::with_capacity(options.len());
         for option in options {
             match option {
@@ -810,7 +814,10 @@ impl Filter {
                 }
             }
         }
-        let mut info: KeyMap<u64, expansion::TrackInfo> = KeyMap::default();
+        let mut info: KeyMap<u64, expansion::TrackInfo> = KeyMap::with_capacity_and_hasher(
+            table.versions.len() + new_versions.len(),
+            Default::default(),
+        );
         for (key, version) in table.versions.iter().chain(new_versions.iter()) {
             info.insert(
                 *key,
@@ -897,7 +904,8 @@ impl Filter {
     ) -> ObservedRates {
         let tables = &self.tables;
         let lineage_before = |key: Key| before.tracks.get(&key).map(|e| e.version.lineage);
-        let mut detector_of: KeyMap<u64, usize> = KeyMap::default();
+        let mut detector_of: KeyMap<u64, usize> =
+            KeyMap::with_capacity_and_hasher(2 * options.len(), Default::default());
         for option in options {
             let detector = measurements[option.row()].detector;
             match option {
@@ -920,11 +928,15 @@ impl Filter {
         }
         let existed: KeySet<u64> = before.tracks.values().map(|e| e.version.lineage).collect();
         let name = |detector: usize| -> Name { tables.detectors[detector].name.clone() };
-        let mut detected: BTreeMap<Name, Vec<u64>> = BTreeMap::new();
-        let mut born: BTreeMap<Name, Vec<u64>> = BTreeMap::new();
-        let mut born_elsewhere: BTreeMap<Name, Vec<u64>> = BTreeMap::new();
-        let mut alive: KeySet<u64> = KeySet::default();
-        let mut classes: KeyMap<u64, Name> = KeyMap::default();
+        // by detector index while filling (no name compared per object), by name after
+        let count = tables.detectors.len();
+        let mut detected_by: Vec<Vec<u64>> = vec![Vec::new(); count];
+        let mut born_by: Vec<Vec<u64>> = vec![Vec::new(); count];
+        let mut born_elsewhere_by: Vec<Vec<u64>> = vec![Vec::new(); count];
+        let mut alive: KeySet<u64> =
+            KeySet::with_capacity_and_hasher(table.versions.len(), Default::default());
+        let mut classes: KeyMap<u64, Name> =
+            KeyMap::with_capacity_and_hasher(fresh.len(), Default::default());
         for cluster in final_clusters {
             for key in &cluster.keys {
                 if let Some(version) = table.versions.get(key) {
@@ -945,22 +957,38 @@ impl Filter {
                 };
                 if best.binary_search(key).is_ok() {
                     let target = if existed.contains(&lineage) {
-                        &mut detected
+                        &mut detected_by
                     } else {
-                        &mut born
+                        &mut born_by
                     };
-                    target.entry(name(by)).or_default().push(lineage);
+                    target[by].push(lineage);
                     classes.insert(lineage, tables.classes[version.cls].name.clone());
                 } else if !existed.contains(&lineage) {
-                    born_elsewhere.entry(name(by)).or_default().push(lineage);
+                    born_elsewhere_by[by].push(lineage);
                 }
             }
         }
+        let by_name = |lists: Vec<Vec<u64>>| -> BTreeMap<Name, Vec<u64>> {
+            lists
+                .into_iter()
+                .enumerate()
+                .filter(|(_, lineages)| !lineages.is_empty())
+                .map(|(detector, lineages)| (name(detector), lineages))
+                .collect()
+        };
+        let (detected, born, born_elsewhere) = (
+            by_name(detected_by),
+            by_name(born_by),
+            by_name(born_elsewhere_by),
+        );
         let (source, scanned): (Name, BTreeSet<Name>) = match (measurements.first(), view) {
-            (Some(first), _) => (
-                first.source.clone(),
-                measurements.iter().map(|m| name(m.detector)).collect(),
-            ),
+            (Some(first), _) => (first.source.clone(), {
+                // the detectors by index first: a name per detector, not per detection
+                let mut used: Vec<usize> = measurements.iter().map(|m| m.detector).collect();
+                used.sort_unstable();
+                used.dedup();
+                used.into_iter().map(name).collect()
+            }),
             (None, Some(view)) => (
                 view.source.clone(),
                 [name(view.detector.unwrap_or(tables.default_detector))]
