@@ -6,7 +6,7 @@ counterpart in :mod:`semwm.filters.batched` and :mod:`semwm.filters.small`, and 
 definite) as the Python engine does.
 """
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import numpy as np
@@ -219,9 +219,16 @@ class Engine:
         ids: Mapping[int, int],
         lost: bool,
         next_id: int,
-    ) -> tuple[
-        dict[int, VersionRef], tuple[dict[int, int], dict[int, VersionRef], int] | None
-    ]: ...
+    ) -> tuple[dict[int, VersionRef] | None, tuple[dict[int, int], Published, int] | None]: ...
+
+class Published(Mapping[int, VersionRef]):
+    """The published world of a scan (id -> ``VersionRef``), its values made on first
+    read."""
+
+    def __len__(self) -> int: ...
+    def __getitem__(self, key: int) -> VersionRef: ...
+    def __iter__(self) -> Iterator[int]: ...
+    def lineages(self) -> list[int]: ...
 
 class VersionRef:
     """A version of a core state (``state``: the ``CoreState`` holding it)."""

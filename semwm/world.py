@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from operator import attrgetter
-from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -155,7 +155,10 @@ class _Held:
     view: SensorView | None = None
 
 
-_Tables = tuple[dict[int, int], int, dict[int, "Track | VersionRef"], dict[int, "_Lost"]]
+_Published = Mapping[int, "Track | VersionRef"]
+"""The published world: id -> version (a dict, or the Rust engine's ``Published``
+table, whose values are made when read)."""
+_Tables = tuple[dict[int, int], int, _Published, dict[int, "_Lost"]]
 """The id tables: lineage -> id, the next id, the published and the lost objects."""
 _Link = tuple[_Held, StateView, BookView, _Tables]
 
@@ -193,6 +196,15 @@ _Floor = tuple[ScanKey, str]
 def _same_tables(a: _Tables, b: _Tables) -> bool:
     """The same id tables (the same dicts, not equal ones)."""
     return a[0] is b[0] and a[1] == b[1] and a[2] is b[2] and a[3] is b[3]
+
+
+def _shown_lineages(published: _Published) -> set[int]:
+    """The lineages of the published world (the Rust engine's table gives them without
+    making its values)."""
+    lineages = getattr(published, "lineages", None)
+    if lineages is not None:
+        return set(lineages())
+    return {track.lineage for track in published.values()}
 
 
 def _same(a: Sequence[Measurement], b: Sequence[Measurement]) -> bool:
@@ -352,7 +364,7 @@ class WorldModel:
         self._next_id = 1
         # id -> the version published (the Rust engine's: a VersionRef, made into a
         # Track only where needed)
-        self._published: dict[int, Track | VersionRef] = {}
+        self._published: _Published = {}
         self._lost: dict[int, _Lost] = {}
         self._pending: dict[ScanKey, _Held] = {}  # held scans (values immutable)
         self._newest: float | None = None  # newest accepted time, pending included
@@ -1028,10 +1040,10 @@ class WorldModel:
                 state, self._published, self._ids, bool(self._lost), self._next_id
             )
             if unchanged is None:
+                assert shown is not None
                 self._publish_changed(shown)
-            else:
-                self._ids, published, self._next_id = unchanged
-                self._published = cast("dict[int, Track | VersionRef]", published)
+            else:  # the published table's values are made if someone reads them
+                self._ids, self._published, self._next_id = unchanged
             return
         current = self._current()
         if (
@@ -1330,7 +1342,7 @@ class WorldModel:
             # version of the most probable hypothesis first (not one that is there only
             # by another hypothesis's account), else the likeliest (existences within
             # TIE of the largest are a tie: the oldest lineage, not rounding, decides)
-            shown = {track.lineage for track in self._published.values()}
+            shown = _shown_lineages(self._published)
             with_id = [m for m in members if m in shown]
             if with_id:
                 best = min(with_id, key=lambda m: (m not in together, self._ids.get(m, 0)))

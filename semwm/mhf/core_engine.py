@@ -26,6 +26,7 @@ from semwm.mhf.state import Cluster, Hypothesis, MHFState, StateView, Track
 
 if TYPE_CHECKING:
     from semwm import _core
+    from semwm._core import Published
     from semwm.knowledge.model import ResolvedClass
     from semwm.mhf.filter import MultipleHypothesisFilter
 
@@ -553,11 +554,13 @@ class CoreEngine:
         ids: Mapping[int, int],
         lost: bool,
         next_id: int,
-    ) -> tuple[dict[int, VersionRef], tuple[dict[int, int], dict[int, VersionRef], int] | None]:
+    ) -> tuple[dict[int, VersionRef] | None, tuple[dict[int, int], Published, int] | None]:
         """``WorldModel._publish`` of ``state`` with its common case in the core:
-        ``(current, unchanged)``; ``unchanged`` is what ``_publish_unchanged`` makes
-        (``ids``, ``published``, ``next_id``) when it applies, else ``None`` and the
-        caller publishes ``current`` in general (``lost``: an id waits for its object)."""
+        ``(current, unchanged)``, one of them ``None``. ``unchanged`` is what
+        ``_publish_unchanged`` makes (``ids``, ``published``, ``next_id``) when it
+        applies, ``published`` a table whose ``VersionRef`` values are made when read;
+        else the caller publishes ``current`` in general (``lost``: an id waits for its
+        object)."""
         return self.engine.publish(state, published, ids, lost, next_id)
 
     def resolve(self, ref: VersionRef) -> Track:

@@ -26,6 +26,7 @@ use crate::mhf::measurement::{Measurement, SensorView};
 use crate::mhf::rates::Name;
 use crate::mhf::state::{next_serial, Entry, FilterState, State, Version};
 use crate::mhf::tables::{Appearance, ClassSpec, DetectorSpec, LeaveRelation, Tables};
+use crate::python::published::{PyPublished, Row};
 use crate::python::rates::PyObservedRates;
 use crate::python::{run, PyClassFilter};
 
@@ -286,7 +287,13 @@ pub struct PyVersionRef {
 #[pymethods]
 impl PyVersionRef {
     #[new]
-    fn new(lineage: u64, cls: Py<PyString>, key: u64, serial: u64, state: Py<PyAny>) -> Self {
+    pub(crate) fn new(
+        lineage: u64,
+        cls: Py<PyString>,
+        key: u64,
+        serial: u64,
+        state: Py<PyAny>,
+    ) -> Self {
         PyVersionRef {
             lineage,
             cls,
@@ -324,6 +331,21 @@ fn lineage_of(value: &Bound<'_, PyAny>) -> PyResult<u64> {
         Ok(reference) => Ok(reference.get().lineage),
         Err(_) => value.getattr("lineage")?.extract(),
     }
+}
+
+/// The lineages of the published world (`WorldModel._published`): a `Published`
+/// table's rows, or a dict's values' lineages.
+fn published_lineages(published: &Bound<'_, PyAny>) -> PyResult<Vec<u64>> {
+    if let Ok(table) = published.cast::<PyPublished>() {
+        return Ok(table.get().lineages().collect());
+    }
+    let dict = published.cast::<PyDict>().map_err(|_| {
+        PyValueError::new_err("published: a dict or a Published table of the shown objects")
+    })?;
+    dict.values()
+        .iter()
+        .map(|value| lineage_of(&value))
+        .collect()
 }
 
 impl PyEngine {
@@ -412,23 +434,19 @@ impl PyEngine {
         Ok(scan)
     }
 
-    /// `world::current` of `state` (a `CoreState`) as `{lineage: VersionRef}`, in the
-    /// specification's order; `published` the objects shown now by id, `ids` theirs.
-    fn current_refs<'py>(
+    /// `world::current` of `state` (a `CoreState`): (lineage, key, class, serial) of
+    /// each object shown, in the specification's order; `published` the objects shown
+    /// now (`WorldModel._published`), `ids` their ids.
+    fn current_rows(
         &self,
-        state: &Bound<'py, PyAny>,
-        published: &Bound<'py, PyDict>,
+        state: &Bound<'_, PyAny>,
+        shown: KeySet<u64>,
         ids: &KeyMap<u64, i64>,
-    ) -> PyResult<(Bound<'py, PyDict>, Vec<u64>)> {
-        let py = state.py();
+    ) -> PyResult<Vec<(u64, u64, usize, u64)>> {
         let core: PyRef<'_, PyState> = state.getattr("core")?.extract()?;
-        let mut shown: KeySet<u64> = KeySet::default();
-        for value in published.values().iter() {
-            shown.insert(lineage_of(&value)?);
-        }
         let filter = self.filter.clone();
         let held = core.state.clone();
-        let rows = run(py, "Engine.current", move || {
+        run(state.py(), "Engine.current", move || {
             let pairs = crate::world::current(&held, &filter.tables, &shown, ids);
             Ok(pairs
                 .into_iter()
@@ -437,25 +455,35 @@ impl PyEngine {
                     (lineage, key, entry.version.cls, entry.serial)
                 })
                 .collect::<Vec<_>>())
-        })?;
+        })
+    }
+
+    /// `rows` (`current_rows`) as `{lineage: VersionRef}`.
+    fn current_refs<'py>(
+        &self,
+        state: &Bound<'py, PyAny>,
+        rows: &[(u64, u64, usize, u64)],
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let py = state.py();
         let current = PyDict::new(py);
-        let mut order = Vec::with_capacity(rows.len());
-        for (lineage, key, cls, serial) in rows {
-            let name = self
-                .names
-                .get(cls)
-                .ok_or_else(|| PyValueError::new_err(format!("Engine.current: no class {cls}")))?;
+        for &(lineage, key, cls, serial) in rows {
             let reference = PyVersionRef {
                 lineage,
-                cls: name.clone_ref(py),
+                cls: self.class_name(py, cls)?,
                 key,
                 serial,
                 state: state.clone().unbind(),
             };
             current.set_item(lineage, Bound::new(py, reference)?)?;
-            order.push(lineage);
         }
-        Ok((current, order))
+        Ok(current)
+    }
+
+    fn class_name(&self, py: Python<'_>, cls: usize) -> PyResult<Py<PyString>> {
+        self.names
+            .get(cls)
+            .map(|name| name.clone_ref(py))
+            .ok_or_else(|| PyValueError::new_err(format!("Engine.current: no class {cls}")))
     }
 }
 
@@ -511,7 +539,7 @@ fn float_values(array: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
 }
 
 /// `WorldModel._publish_unchanged`'s tables: `(ids, published, next_id)`.
-type Unchanged<'py> = (Bound<'py, PyDict>, Bound<'py, PyDict>, i64);
+type Unchanged<'py> = (Bound<'py, PyDict>, Bound<'py, PyPublished>, i64);
 
 fn id_table(ids: &Bound<'_, PyDict>) -> PyResult<KeyMap<u64, i64>> {
     let mut table: KeyMap<u64, i64> = KeyMap::default();
@@ -560,69 +588,77 @@ impl PyEngine {
 
     /// The published world of `state`, a `CoreState` (`WorldModel._current`):
     /// `{lineage: VersionRef}` of each object shown, in the specification's order;
-    /// `published` the objects shown now by id (`WorldModel._published`), `ids` their
-    /// ids (`WorldModel._ids`, lineage -> id).
+    /// `published` the objects shown now by id (`WorldModel._published`: a dict or a
+    /// `Published`), `ids` their ids (`WorldModel._ids`, lineage -> id).
     fn current<'py>(
         &self,
         state: &Bound<'py, PyAny>,
-        published: &Bound<'py, PyDict>,
+        published: &Bound<'py, PyAny>,
         ids: &Bound<'py, PyDict>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        Ok(self.current_refs(state, published, &id_table(ids)?)?.0)
+        let shown = published_lineages(published)?.into_iter().collect();
+        let rows = self.current_rows(state, shown, &id_table(ids)?)?;
+        self.current_refs(state, &rows)
     }
 
     /// `WorldModel._publish` of `state` (a `CoreState`) with its common case here:
-    /// `(current, unchanged)`, `current` as `Engine.current` gives it; `unchanged` is
-    /// `None` unless no published object left the world (`lost` is empty, every lineage
-    /// with an id and every published one is in `current`), and then `(ids, published,
-    /// next_id)` as `WorldModel._publish_unchanged` makes them: new lineages take the
-    /// next ids in `current`'s order (`ids` itself when there are none).
+    /// `(current, unchanged)`, one of them `None`. `unchanged` when no published object
+    /// left the world (`lost` is empty, every lineage with an id and every published one
+    /// is shown): `(ids, published, next_id)` as `WorldModel._publish_unchanged` makes
+    /// them, new lineages taking the next ids in the published world's order (`ids`
+    /// itself when there are none), `published` a `Published` table. Otherwise
+    /// `current` as `Engine.current` gives it, for `WorldModel._publish_changed`.
     fn publish<'py>(
-        &self,
+        slf: &Bound<'py, Self>,
         state: &Bound<'py, PyAny>,
-        published: &Bound<'py, PyDict>,
+        published: &Bound<'py, PyAny>,
         ids: &Bound<'py, PyDict>,
         lost: bool,
         next_id: i64,
-    ) -> PyResult<(Bound<'py, PyDict>, Option<Unchanged<'py>>)> {
+    ) -> PyResult<(Option<Bound<'py, PyDict>>, Option<Unchanged<'py>>)> {
         let py = state.py();
+        let engine = slf.get();
         let table = id_table(ids)?;
-        let (current, order) = self.current_refs(state, published, &table)?;
-        if lost {
-            return Ok((current, None));
+        let before: KeySet<u64> = published_lineages(published)?.into_iter().collect();
+        let rows = engine.current_rows(state, before.clone(), &table)?;
+        let showing: KeySet<u64> = rows.iter().map(|row| row.0).collect();
+        let left = lost
+            || table.keys().any(|lineage| !showing.contains(lineage))
+            || before.iter().any(|lineage| !showing.contains(lineage));
+        if left {
+            return Ok((Some(engine.current_refs(state, &rows)?), None));
         }
-        let showing: KeySet<u64> = order.iter().copied().collect();
-        if table.keys().any(|lineage| !showing.contains(lineage)) {
-            return Ok((current, None));
-        }
-        for value in published.values().iter() {
-            if !showing.contains(&lineage_of(&value)?) {
-                return Ok((current, None));
+        let (mut table, mut next_id) = (table, next_id);
+        let mut copied: Option<Bound<'py, PyDict>> = None;
+        for &(lineage, ..) in &rows {
+            if table.contains_key(&lineage) {
+                continue;
             }
+            // a new table: one a query cached must not change
+            let fresh = match &copied {
+                Some(dict) => dict,
+                None => copied.insert(ids.copy()?),
+            };
+            fresh.set_item(lineage, next_id)?;
+            table.insert(lineage, next_id);
+            next_id += 1;
         }
-        let fresh: Vec<u64> = order
+        let shown = rows
             .iter()
-            .copied()
-            .filter(|lineage| !table.contains_key(lineage))
+            .map(|&(lineage, key, cls, serial)| Row {
+                id: table[&lineage],
+                lineage,
+                key,
+                serial,
+                cls,
+            })
             .collect();
-        let (ids, mut table, mut next_id) = (ids.clone(), table, next_id);
-        let ids = if fresh.is_empty() {
-            ids
-        } else {
-            let copied = ids.copy()?; // a new table: one a query cached must not change
-            for lineage in fresh {
-                copied.set_item(lineage, next_id)?;
-                table.insert(lineage, next_id);
-                next_id += 1;
-            }
-            copied
-        };
-        let shown = PyDict::new(py);
-        for (lineage, reference) in current.iter() {
-            let lineage: u64 = lineage.extract()?;
-            shown.set_item(table[&lineage], reference)?;
-        }
-        Ok((current, Some((ids, shown, next_id))))
+        let names = engine.names.iter().map(|name| name.clone_ref(py)).collect();
+        let shown = Bound::new(py, PyPublished::new(shown, names, state.clone().unbind()))?;
+        Ok((
+            None,
+            Some((copied.unwrap_or_else(|| ids.clone()), shown, next_id)),
+        ))
     }
 
     /// The confidence book after one scan (`semwm.confidence.advance`; `state` is the

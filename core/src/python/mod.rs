@@ -9,6 +9,7 @@
 //! never unwound into Python. No `unsafe` here.
 
 mod engine;
+mod published;
 mod rates;
 mod reader;
 mod similar;
@@ -973,6 +974,7 @@ fn semwm_core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<engine::PyState>()?;
     module.add_class::<engine::PyBook>()?;
     module.add_class::<engine::PyVersionRef>()?;
+    module.add_class::<published::PyPublished>()?;
     module.add_class::<reader::PyDetectionReader>()?;
     Ok(())
 }
