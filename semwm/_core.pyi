@@ -6,11 +6,13 @@ counterpart in :mod:`semwm.filters.batched` and :mod:`semwm.filters.small`, and 
 definite) as the Python engine does.
 """
 
-from collections.abc import Iterator, Mapping
-from typing import Any
+from collections.abc import Iterator, Mapping, Sequence
+from typing import Any, overload
 
 import numpy as np
 from numpy.typing import NDArray
+
+from semwm.mhf.measurement import Measurement
 
 _F = NDArray[np.float64]
 
@@ -190,13 +192,16 @@ class Book:
 class Engine:
     def __init__(self, tables: dict[str, object]) -> None: ...
     def process_measurements(
-        self, state: State, measurements: list[Any], view: tuple[object, ...] | None = None
+        self,
+        state: State,
+        measurements: Sequence[Measurement],
+        view: tuple[object, ...] | None = None,
     ) -> State: ...
     def process_and_advance(
         self,
         state: State,
         book: Book,
-        measurements: list[Any],
+        measurements: Sequence[Measurement],
         view: tuple[object, ...] | None = None,
         source: str | None = None,
     ) -> tuple[State, Book]: ...
@@ -250,6 +255,7 @@ class DetectionReader:
 
     def __init__(
         self,
+        engine: Engine,
         measurement: type,
         detection: type,
         dimension: int,
@@ -260,4 +266,22 @@ class DetectionReader:
     ) -> None: ...
     def read(
         self, batch: list[Any], first_seq: int
-    ) -> tuple[list[Any], dict[tuple[float, str], list[Any]]] | None: ...
+    ) -> tuple[int, dict[tuple[float, str], Sequence[Measurement]]] | None: ...
+
+class Scan(Sequence[Measurement]):
+    """A scan's detections as read: the core's rows, and the ``Measurement`` values
+    they stand for, made on first read."""
+
+    def __len__(self) -> int: ...
+    @overload
+    def __getitem__(self, index: int) -> Measurement: ...
+    @overload
+    def __getitem__(self, index: slice) -> list[Measurement]: ...
+    def rows(
+        self,
+    ) -> list[
+        tuple[
+            int, float, int, list[float], list[float], int, str, str | None, float,
+            list[float] | None, float,
+        ]
+    ]: ...

@@ -18,6 +18,7 @@ from semwm.mhf.measurement import Measurement
 
 if TYPE_CHECKING:
     from semwm import _core
+    from semwm.mhf.core_engine import CoreEngine
 
 DetectionInput = Detection | Mapping[str, Any]
 _new_tuple = tuple.__new__
@@ -199,13 +200,16 @@ def _measurement(det: Detection, seq: int, detector: str, pair: _Resolved) -> Me
     )
 
 
-def core_reader(knowledge: Knowledge, factory: FilterFactory) -> _core.DetectionReader:
+def core_reader(
+    knowledge: Knowledge, factory: FilterFactory, engine: CoreEngine
+) -> _core.DetectionReader:
     """The Rust engine's reader of plain batches (``core/src/python/reader.rs``): what
     :func:`parse`, :func:`check` and ``WorldModel._placed`` make of a batch whose every
     detection is plain, in one pass (its ``read`` answers ``None`` for any other batch,
-which then takes the specification's path). It is handed what
-    this module computes: each (class, detector) pair's :func:`_resolved` values, its
-    detector's range and :func:`region_bounds` for its noise."""
+    which then takes the specification's path). It is handed what this module computes:
+    each (class, detector) pair's :func:`_resolved` values, its detector's range and
+    :func:`region_bounds` for its noise, and the indices of ``engine``'s tables, for
+    which it reads each scan's rows (a ``semwm._core.Scan``)."""
     from semwm import _core
 
     pairs: dict[tuple[str, str], Any] = {}
@@ -219,8 +223,11 @@ which then takes the specification's path). It is handed what
                 float(pair.clutter_rate),
                 None if spec.range is None else float(spec.range),
                 bounds,
+                engine.index[cls],
+                engine.detectors[detector],
             )
     return _core.DetectionReader(
+        engine.engine,
         Measurement,
         Detection,
         knowledge.world.dimension,

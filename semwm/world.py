@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from operator import attrgetter
-from typing import TYPE_CHECKING, Any, Literal, NamedTuple
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -136,7 +136,7 @@ class _LoggedScan(NamedTuple):
     named tuple: one is made per scan)."""
 
     key: ScanKey
-    measurements: tuple[Measurement, ...]
+    measurements: Sequence[Measurement]  # never changed (a tuple, or the reader's Scan)
     before: StateView
     view: SensorView | None
     book: BookView
@@ -205,6 +205,12 @@ def _shown_lineages(published: _Published) -> set[int]:
     if lineages is not None:
         return set(lineages())
     return {track.lineage for track in published.values()}
+
+
+def _frozen(scan: Sequence[Measurement]) -> Sequence[Measurement]:
+    """A scan's measurements as a sequence nobody changes: a list copied into a tuple;
+    a tuple, or the reader's ``Scan``, as it is."""
+    return tuple(scan) if isinstance(scan, list) else scan
 
 
 def _same(a: Sequence[Measurement], b: Sequence[Measurement]) -> bool:
@@ -347,9 +353,8 @@ class WorldModel:
         self._knowledge = knowledge
         self._mhf = MultipleHypothesisFilter(knowledge, self.engine)
         # the Rust engine reads plain batches in one pass, as the three below decide
-        self._reader = (
-            core_reader(knowledge, self._mhf.factory) if self.engine == "rust" else None
-        )
+        core = self._mhf._core
+        self._reader = None if core is None else core_reader(knowledge, self._mhf.factory, core)
         self._summaries = {}  # the region may have changed
 
     def reset(self) -> None:
@@ -534,9 +539,20 @@ class WorldModel:
         sensor: SensorReport | Mapping[str, Any] | None,
     ) -> IngestResult:
         batch = as_batch(detections)
-        measurements, used, skipped, scans = self._read(batch)
-        view = self._view(sensor, measurements) if sensor is not None else None
-        grouped = (scans, {}) if scans is not None and view is None else _grouped(used, view)
+        read = self._reader.read(batch, self._seq) if self._reader is not None else None
+        if read is not None and sensor is None:  # the common batch: its scans as read
+            applied, skipped = read[0], list[IgnoredDetection]()
+            grouped: tuple[dict[ScanKey, Sequence[Measurement]], dict[ScanKey, SensorView]]
+            grouped = (read[1], {})
+            view = None
+        else:
+            measurements, used, skipped = self._read(batch, read)
+            view = self._view(sensor, measurements) if sensor is not None else None
+            grouped = cast(
+                "tuple[dict[ScanKey, Sequence[Measurement]], dict[ScanKey, SensorView]]",
+                _grouped(used, view),
+            )
+            applied = len(used)
         ignored = len(skipped)
         latest = self._state.time
         # the batch's scans (its used detections' and its view's): their times are the
@@ -554,40 +570,40 @@ class WorldModel:
             newest, earliest = max(times), min(times)
             self._newest = newest if self._newest is None else max(self._newest, newest)
             self._earliest = earliest if self._earliest is None else min(self._earliest, earliest)
-        if self._hold > 0 and (used or view is not None):
+        if self._hold > 0 and (applied or view is not None):
             self._hold_scans(*grouped)
-        elif used or view is not None:
+        elif applied or view is not None:
             self._commit(*self._process_scans(*grouped))
             self._publish()
         self._seq += len(batch)
         return IngestResult(
-            applied=len(used),
+            applied=applied,
             time=self.latest_time,
             ignored=ignored,
             ignored_detections=tuple(skipped),
         )
 
-    def _read(self, batch: list[DetectionInput]) -> tuple[
-        list[Measurement],
-        list[Measurement],
-        list[IgnoredDetection],
-        dict[ScanKey, list[Measurement]] | None,
-    ]:
-        """A batch's measurements, those used, why each other detection is not, and the
-        used ones by scan if the Rust engine's reader read the batch (else ``None``).
+    def _read(
+        self,
+        batch: list[DetectionInput],
+        read: tuple[int, Mapping[ScanKey, Sequence[Measurement]]] | None = None,
+    ) -> tuple[list[Measurement], list[Measurement], list[IgnoredDetection]]:
+        """A batch's measurements, those used, and why each other detection is not.
 
         The specification: :func:`~semwm.validation.parse`, then
         :func:`~semwm.validation.check` against the knowledge (raises
         ``DetectionError``), then :meth:`_placed`. The Rust engine's reader gives the
-        same for a batch of plain detections in one pass, grouped as :func:`_grouped`
-        groups them (docs/engines.md, "The boundary")."""
-        read = self._reader.read(batch, self._seq) if self._reader is not None else None
-        if read is not None:  # every detection plain: all used
-            return read[0], read[0], [], read[1]
+        same for a batch of plain detections in one pass (``read``: its answer, the
+        batch's scans; docs/engines.md, "The boundary"); all of them are used."""
+        if read is not None:  # every detection plain, numbered in the batch's order
+            measurements = sorted(
+                (m for scan in read[1].values() for m in scan), key=attrgetter("seq")
+            )
+            return measurements, measurements, []
         parsed = parse(batch)
         measurements = check(parsed, self._knowledge, self._mhf.factory, self._seq)
         used, skipped = self._placed(parsed, measurements)
-        return measurements, used, skipped, None
+        return measurements, used, skipped
 
     def _placed(
         self, parsed: list[Detection], measurements: list[Measurement]
@@ -676,7 +692,7 @@ class WorldModel:
         self._state, self._log, self._book, self._replay_floor = state, log, book, floor
 
     def _hold_scans(
-        self, scans: dict[ScanKey, list[Measurement]], views: dict[ScanKey, SensorView]
+        self, scans: dict[ScanKey, Sequence[Measurement]], views: dict[ScanKey, SensorView]
     ) -> None:
         """Scans before the latest processed one are processed now (replayed); the others
         join the pending ones, and those the hold no longer keeps are processed."""
@@ -871,7 +887,7 @@ class WorldModel:
         )
 
     def _process_scans(
-        self, scans: dict[ScanKey, list[Measurement]], views: dict[ScanKey, SensorView]
+        self, scans: dict[ScanKey, Sequence[Measurement]], views: dict[ScanKey, SensorView]
     ) -> tuple[StateView, list[_LoggedScan], BookView, _Floor | None]:
         """Process new scans, grouped by key (:func:`_grouped`; ``scans`` not empty and
         changed here), in time order, replaying logged scans they precede.
@@ -902,7 +918,7 @@ class WorldModel:
             scan_view = views.get(key)
             state, book = self._step(state, book, scans[key], scan_view)
             if keep:
-                log.append(_LoggedScan(key, tuple(scans[key]), before, scan_view, before_book))
+                log.append(_LoggedScan(key, _frozen(scans[key]), before, scan_view, before_book))
         assert state.time is not None
         horizon = state.time - self.reorder_window
         if keep:  # the log is in key (time) order: drop its head
@@ -996,7 +1012,7 @@ class WorldModel:
         self,
         state: StateView,
         book: BookView,
-        measurements: list[Measurement],
+        measurements: Sequence[Measurement],
         view: SensorView | None,
     ) -> tuple[StateView, BookView]:
         """One scan processed: the MHF (paper 002) and the confidences (paper 004). The

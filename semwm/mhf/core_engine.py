@@ -403,10 +403,13 @@ class CoreEngine:
         after = self.engine.process_measurements(core, self.scan_rows(measurements), view_row)
         return CoreState(after, self)
 
-    def scan_rows(self, measurements: Sequence[Measurement]) -> list[Measurement]:
-        """The rows a scan hands the core: its measurements as they are (one place, so
+    def scan_rows(self, measurements: Sequence[Measurement]) -> Sequence[Measurement]:
+        """The rows a scan hands the core: its measurements as they are, a list, or the
+        reader's ``Scan`` whose rows the core takes without its values (one place, so
         that a test can alter what the core sees)."""
-        return list(measurements)
+        return (
+            measurements if isinstance(measurements, list | self._core.Scan) else list(measurements)
+        )
 
     def process_and_advance(
         self,

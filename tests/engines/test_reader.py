@@ -12,6 +12,7 @@ such a detection, never for a plain one.
 from __future__ import annotations
 
 import math
+import pickle
 from typing import Any
 
 import numpy as np
@@ -22,7 +23,9 @@ from hypothesis import strategies as st
 from semwm.detection import Detection, DetectionError
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
+from semwm.mhf.core_engine import as_python
 from semwm.mhf.measurement import Measurement
+from semwm.mhf.state import MHFState
 from semwm.validation import as_batch, check, core_reader, parse
 from semwm.world import WorldModel, _grouped
 
@@ -133,7 +136,7 @@ def _same(read: Measurement, expected: Measurement) -> None:
 @given(data=st.data())
 def test_the_reader_makes_what_the_specification_makes(knowledge: Any, data: Any) -> None:
     model = WorldModel(knowledge, engine="rust")
-    reader = core_reader(knowledge, model._mhf.factory)
+    reader = _reader(model)
     drawn = data.draw(st.lists(detections(knowledge), min_size=1, max_size=4))
     batch = [item for item, _ in drawn]
     first_seq = data.draw(st.integers(0, 10**6))
@@ -142,32 +145,66 @@ def test_the_reader_makes_what_the_specification_makes(knowledge: Any, data: Any
     if answer is None:
         assert any(odd for _, odd in drawn), f"a plain batch was given back: {batch}"
         return
-    read, scans = answer
+    count, scans = answer
+    read = _in_batch_order(scans)
     assert expected is not None, "the reader took a batch the specification refuses"
     used, ignored = expected
     assert ignored == 0, "the reader took a batch the specification ignores part of"
-    assert len(read) == len(used)
+    assert count == len(read) == len(used)
     for a, b in zip(read, used, strict=True):
         _same(a, b)
     _same_scans(scans, read)
+    for scan in scans.values():
+        _rows_say_the_values(model, scan)
 
 
-def _same_scans(scans: dict[Any, list[Measurement]], read: list[Measurement]) -> None:
+def _reader(model: WorldModel) -> Any:
+    assert model._mhf._core is not None
+    return core_reader(model.knowledge, model._mhf.factory, model._mhf._core)
+
+
+def _in_batch_order(scans: dict[Any, Any]) -> list[Measurement]:
+    return sorted((m for scan in scans.values() for m in scan), key=lambda m: m.seq)
+
+
+def _same_scans(scans: dict[Any, Any], read: list[Measurement]) -> None:
     """The reader's scans are :func:`semwm.world._grouped`'s: the same keys, of the same
-    types, in the same order, each holding the same measurements in batch order."""
+    types, in the same order, each holding the same measurements in batch order (the
+    same values each time they are read)."""
     expected, _ = _grouped(read, None)
     assert list(scans) == list(expected)
     assert [tuple(map(type, key)) for key in scans] == [tuple(map(type, k)) for k in expected]
     for key, group in expected.items():
+        assert len(scans[key]) == len(group)
         assert [m.seq for m in scans[key]] == [m.seq for m in group]
         assert all(a is b for a, b in zip(scans[key], group, strict=True))
+
+
+def _rows_say_the_values(model: WorldModel, scan: Any) -> None:
+    """The core's rows of a scan (what the engine takes without its values) are what
+    its ``Measurement`` values say, field by field."""
+    core = model._mhf._core
+    assert core is not None
+    detectors = list(model.knowledge.detectors)
+    rows = scan.rows()
+    assert len(rows) == len(scan)
+    for row, m in zip(rows, scan, strict=True):
+        seq, time, cls, z, r, detector, source, label, clutter, sensor, time_std = row
+        assert (seq, time, core.names[cls], detectors[detector]) == (
+            m.seq, m.time, m.cls, m.detector,
+        )  # fmt: skip
+        assert z == m.z.tolist() and r == m.R.ravel().tolist()
+        assert (source, label, clutter, time_std) == (
+            m.source or "", m.label, m.clutter_rate, m.time_std,
+        )  # fmt: skip
+        assert sensor == (None if m.sensor is None else m.sensor.tolist())
 
 
 def test_a_plain_batch_of_either_form_is_read() -> None:
     """Dicts from the wire and ``Detection`` values alike; a label of a foreign class
     is dropped as ``check`` drops it (paper 004: tracked from observation only)."""
     model = WorldModel(ROBOCUP, engine="rust")
-    reader = core_reader(ROBOCUP, model._mhf.factory)
+    reader = _reader(model)
     batch: list[Any] = [
         {"time": 1.0, "class": "Opponent", "position": [1.0, 2.0], "label": "o7"},
         Detection.model_validate(
@@ -177,7 +214,9 @@ def test_a_plain_batch_of_either_form_is_read() -> None:
     ]  # fmt: skip
     answer = reader.read(batch, 7)
     assert answer is not None
-    read, scans = answer
+    count, scans = answer
+    read = _in_batch_order(scans)
+    assert count == 2
     assert list(scans) == [(1.0, "")] and scans[1.0, ""] == read  # one scan, no source
     assert [m.seq for m in read] == [7, 8]
     assert [m.label for m in read] == [None, "me"]
@@ -188,20 +227,30 @@ def test_a_plain_batch_of_either_form_is_read() -> None:
         _same(a, b)
 
 
-def test_models_with_and_without_the_reader_agree() -> None:
+@pytest.mark.parametrize(
+    ("reorder_window", "hold"), [(0.0, 0.0), (0.5, 0.0), (0.5, 0.15)], ids=["now", "replay", "hold"]
+)
+def test_models_with_and_without_the_reader_agree(reorder_window: float, hold: float) -> None:
     """The same batches, plain or not (ignored detections, refused batches), give the
-    same answers and the same world with the reader as through the specification."""
+    same answers and the same world with the reader as through the specification;
+    with a reorder window, late batches replay the logged scans the reader read, and a
+    hold keeps them pending (their values are then read: ``semwm._core.Scan``)."""
     rng = np.random.default_rng(3)
-    fast, spec = (WorldModel(ROBOCUP, engine="rust") for _ in range(2))
+    fast, spec = (
+        WorldModel(ROBOCUP, engine="rust", reorder_window=reorder_window, hold=hold)
+        for _ in range(2)
+    )
     spec._reader = None
     for step in range(40):
+        late = reorder_window > 0 and rng.random() < 0.3
+        time = max(0.0, step * 0.1 - (float(rng.uniform(0.05, 0.3)) if late else 0.0))
         batch: list[dict[str, Any]] = []
         for _ in range(int(rng.integers(1, 5))):
             item: dict[str, Any] = {
-                "time": step * 0.1,
+                "time": time,
                 "class": str(rng.choice(["Ball", "Opponent", "Peer"])),
                 "position": [float(rng.uniform(-10, 10)), float(rng.uniform(-7, 7))],
-                "source": "r1",
+                "source": str(rng.choice(["r1", "r2"])),
             }
             if rng.random() < 0.1:
                 item["class"] = "Unknown"
@@ -217,3 +266,41 @@ def test_models_with_and_without_the_reader_agree() -> None:
         assert [(o.id, o.cls) for o in a.objects] == [(o.id, o.cls) for o in b.objects]
         for x, y in zip(a.objects, b.objects, strict=True):
             assert np.array_equal(x.position, y.position)
+    assert fast.replayed_scans == spec.replayed_scans
+    if reorder_window > 0 and hold == 0:
+        assert fast.replayed_scans > 0  # the late batches were replays
+    if hold > 0:
+        assert fast.pending_scans == spec.pending_scans
+
+
+def test_a_scan_reads_as_its_measurements_once() -> None:
+    """A scan's values are made once (the same objects on every read), pickle as the
+    tuple of them, and another engine takes the scan by its values."""
+    model, other = WorldModel(SIM1, engine="rust"), WorldModel(SIM1, engine="rust")
+    batch = [
+        {"time": 2.0, "class": cls, "position": [x, 1.0], "source": "cam"}
+        for x, cls in ((0.5, "Cup"), (1.5, "Table"), (3.0, "Cup"))
+    ]
+    answer = _reader(model).read(batch, 0)
+    assert answer is not None
+    (key, scan), *rest = answer[1].items()
+    assert key == (2.0, "cam") and not rest and len(scan) == 3
+    assert scan[0] is scan[0] and list(scan)[2] is scan[-1] and scan[1:] == list(scan)[1:]
+    copied = pickle.loads(pickle.dumps(scan))
+    assert type(copied) is tuple and len(copied) == 3
+    for a, b in zip(copied, scan, strict=True):
+        _same_values(a, b)
+    assert other._mhf._core is not None and model._mhf._core is not None
+    states = []
+    for measurements in (scan, list(scan)):
+        empty = MHFState.empty()
+        state, _ = other._mhf._core.process_and_advance(empty, other._book, measurements, None)
+        states.append(as_python(state))
+    assert [t.lineage for t in states[0].tracks.values()] == [0, 1, 2]
+    for a, b in zip(states[0].tracks.values(), states[1].tracks.values(), strict=True):
+        assert (a.key, a.cls) == (b.key, b.cls) and np.array_equal(a.x, b.x)
+
+
+def _same_values(a: Measurement, b: Measurement) -> None:
+    for name, x, y in zip(Measurement._fields, a, b, strict=True):
+        assert np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y, name

@@ -28,6 +28,7 @@ use crate::mhf::state::{next_serial, Entry, FilterState, State, Version};
 use crate::mhf::tables::{Appearance, ClassSpec, DetectorSpec, LeaveRelation, Tables};
 use crate::python::published::{PyPublished, Row};
 use crate::python::rates::PyObservedRates;
+use crate::python::scan::PyScan;
 use crate::python::{run, PyClassFilter};
 
 fn item<'py, T: FromPyObjectOwned<'py>>(dict: &Bound<'py, PyDict>, key: &str) -> PyResult<T> {
@@ -539,6 +540,28 @@ fn float_values(array: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
 }
 
 /// `WorldModel._publish_unchanged`'s tables: `(ids, published, next_id)`.
+/// A scan's rows for `engine`: a `Scan` the reader read for it as they are; a list of
+/// `Measurement`s (or another engine's `Scan`, by its values) read here.
+fn scan_rows(
+    engine: &Bound<'_, PyEngine>,
+    measurements: &Bound<'_, PyAny>,
+) -> PyResult<Arc<[Measurement]>> {
+    if let Ok(scan) = measurements.cast::<PyScan>() {
+        let scan = scan.get();
+        if scan.engine.bind(engine.py()).is(engine) {
+            return Ok(scan.rows.clone());
+        }
+        return Ok(engine
+            .get()
+            .read_measurements(scan.values(engine.py())?)?
+            .into());
+    }
+    let list = measurements.cast::<PyList>().map_err(|_| {
+        PyValueError::new_err("measurements: a list of Measurement values or a Scan")
+    })?;
+    Ok(engine.get().read_measurements(list)?.into())
+}
+
 type Unchanged<'py> = (Bound<'py, PyDict>, Bound<'py, PyPublished>, i64);
 
 fn id_table(ids: &Bound<'_, PyDict>) -> PyResult<KeyMap<u64, i64>> {
@@ -706,17 +729,18 @@ impl PyEngine {
     /// tuples: seq, time, class, z, R, detector, source, label, clutter rate, sensor,
     /// time std; detections sharing a source and a time), read here without a Python
     /// row per detection, and where the sensor looked (or `None`).
+    /// `measurements` may also be a `Scan` the reader read for this engine.
     #[pyo3(signature = (state, measurements, view=None))]
     fn process_measurements(
-        &self,
+        slf: &Bound<'_, Self>,
         py: Python<'_>,
         state: &PyState,
-        measurements: &Bound<'_, PyList>,
+        measurements: &Bound<'_, PyAny>,
         view: Option<ViewRow>,
     ) -> PyResult<PyState> {
-        let scan = self.read_measurements(measurements)?;
+        let scan = scan_rows(slf, measurements)?;
+        let filter = slf.get().filter.clone();
         let view = view.map(sensor_view);
-        let filter = self.filter.clone();
         let before = state.state.clone();
         let after = run(py, "Engine.process_measurements", move || {
             filter.process_scan(&before, &scan, view.as_ref())
@@ -730,19 +754,19 @@ impl PyEngine {
     /// in one call (`WorldModel._step`): `(state, book)`; `source` the view's source.
     #[pyo3(signature = (state, book, measurements, view=None, source=None))]
     fn process_and_advance(
-        &self,
+        slf: &Bound<'_, Self>,
         py: Python<'_>,
         state: &PyState,
         book: &PyBook,
-        measurements: &Bound<'_, PyList>,
+        measurements: &Bound<'_, PyAny>,
         view: Option<ViewRow>,
         source: Option<String>,
     ) -> PyResult<(PyState, PyBook)> {
-        let scan = self.read_measurements(measurements)?;
+        let scan = scan_rows(slf, measurements)?;
         let detectors: Vec<usize> = scan.iter().map(|m| m.detector).collect();
         let view = view.map(sensor_view);
         let source = source.map(Name::from);
-        let filter = self.filter.clone();
+        let filter = slf.get().filter.clone();
         let (before, before_book) = (state.state.clone(), book.book.clone());
         let (after, after_book) = run(py, "Engine.process_and_advance", move || {
             let after = filter.process_scan(&before, &scan, view.as_ref())?;

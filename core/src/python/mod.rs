@@ -12,6 +12,7 @@ mod engine;
 mod published;
 mod rates;
 mod reader;
+mod scan;
 mod similar;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -976,5 +977,6 @@ fn semwm_core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<engine::PyVersionRef>()?;
     module.add_class::<published::PyPublished>()?;
     module.add_class::<reader::PyDetectionReader>()?;
+    module.add_class::<scan::PyScan>()?;
     Ok(())
 }

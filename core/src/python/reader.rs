@@ -14,23 +14,33 @@
 //! answers `None`, and the batch takes the specification's path, which reports every
 //! problem and every detection it ignores. `tests/engines/test_reader.py` holds the two
 //! paths equal.
+//!
+//! Each scan it reads is a `Scan` (`scan.rs`): the core's rows for the engine the
+//! reader was made for, its `Measurement` values made only if Python reads them.
 
 use std::collections::HashMap;
+use std::sync::Arc;
 
-use numpy::PyArray1;
 use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyFloat, PyList, PyString, PyTuple, PyType};
 
-use crate::mhf::measurement::{within_bounds, within_reach};
+use crate::mhf::measurement::{within_bounds, within_reach, Measurement};
+use crate::mhf::rates::Name;
+use crate::python::scan::{Given, Makers, PyScan};
 
 /// What a (class, detector) pair gives its detections (`semwm.validation._Resolved`),
 /// with its detector's range and the region's bounds for the pair's noise.
 struct Pair {
-    /// The shared, read-only noise array.
+    /// The shared, read-only noise array, and its values (row-major).
     r: Py<PyAny>,
+    r_values: Vec<f64>,
     trust_labels: bool,
     clutter_rate: Py<PyAny>,
+    clutter_rate_value: f64,
+    /// The class's and the detector's indices in the engine's tables.
+    cls: usize,
+    detector: usize,
     reach: Option<f64>,
     /// `semwm.validation.region_bounds`: `None` without a region.
     bounds: Option<(Vec<f64>, Vec<f64>)>,
@@ -114,28 +124,19 @@ fn name<'a, 'py>(
     }
 }
 
-/// A detection read: its `Measurement` and its scan's time and source.
+/// A detection read: its core row, its Python values, and its scan's time as given.
 struct Read<'py> {
-    measurement: Bound<'py, PyAny>,
+    row: Measurement,
+    given: Given,
     time: Bound<'py, PyAny>,
-    source: Option<Bound<'py, PyString>>,
-}
-
-impl Read<'_> {
-    /// `m.source or ""`, the scan key's source.
-    fn source_text(&self) -> PyResult<&str> {
-        match &self.source {
-            Some(source) => source.to_str(),
-            None => Ok(""),
-        }
-    }
 }
 
 #[pyclass(name = "DetectionReader", module = "semwm._core", frozen)]
 pub struct PyDetectionReader {
-    measurement: Py<PyType>,
+    makers: Arc<Makers>,
     detection: Py<PyType>,
-    tuple_new: Py<PyAny>,
+    /// The engine whose tables the rows index (`semwm._core.Engine`).
+    engine: Py<PyAny>,
     dim: usize,
     max_time: f64,
     max_time_std: f64,
@@ -146,13 +147,14 @@ pub struct PyDetectionReader {
 }
 
 impl PyDetectionReader {
-    /// One plain detection as its `Measurement` with its scan's key (time, source), or
-    /// `None`.
+    /// One plain detection read, or `None`. `last_source`: the previous detection's
+    /// source name, shared when this one names the same.
     fn read_one<'py>(
         &self,
         py: Python<'py>,
         item: &Bound<'py, PyAny>,
         seq: u64,
+        last_source: &mut Option<Name>,
     ) -> PyResult<Option<Read<'py>>> {
         let fields = if let Ok(dict) = item.cast_exact::<PyDict>() {
             Fields::of(dict, "class")?
@@ -202,20 +204,18 @@ impl PyDetectionReader {
         let Some(z) = finite_vector(position, self.dim) else {
             return Ok(None);
         };
-        let time_std = match &fields.time_std {
-            None => self.zero.bind(py).clone(),
+        let (time_std, time_std_value) = match &fields.time_std {
+            None => (self.zero.bind(py).clone(), 0.0),
             Some(value) => match bounded_float(value, 0.0, self.max_time_std) {
                 None => return Ok(None),
-                Some(0.0) => self.zero.bind(py).clone(), // `det.time_std or 0.0`
-                Some(_) => value.clone(),
+                Some(0.0) => (self.zero.bind(py).clone(), 0.0), // `det.time_std or 0.0`
+                Some(given) => (value.clone(), given),
             },
         };
         let sensor = match &fields.sensor {
-            None => py.None().into_bound(py),
+            None => None,
             Some(value) => match finite_vector(value, self.dim) {
-                Some(sensor) if within_reach(&z, &sensor, pair.reach) => {
-                    PyArray1::from_slice(py, &sensor).into_any()
-                }
+                Some(sensor) if within_reach(&z, &sensor, pair.reach) => Some(sensor),
                 _ => return Ok(None),
             },
         };
@@ -224,45 +224,69 @@ impl PyDetectionReader {
                 return Ok(None);
             }
         }
-        let none = || py.None().into_bound(py);
         let label = match label {
-            Some(label) if pair.trust_labels => label.clone().into_any(),
-            _ => none(),
+            Some(label) if pair.trust_labels => Some(label),
+            _ => None,
         };
-        let values: [Bound<'py, PyAny>; 11] = [
-            seq.into_pyobject(py)?.into_any(),
-            time.clone(),
-            cls.clone().into_any(),
-            PyArray1::from_slice(py, &z).into_any(),
-            pair.r.bind(py).clone(),
-            detector.clone().into_any(),
-            source.map_or_else(none, |source| source.clone().into_any()),
-            label,
-            pair.clutter_rate.bind(py).clone(),
+        let source_text = match source {
+            Some(source) => source.to_str()?,
+            None => "",
+        };
+        let source_name = match last_source {
+            Some(name) if &**name == source_text => name.clone(),
+            _ => last_source.insert(Name::from(source_text)).clone(),
+        };
+        let row = Measurement {
+            seq,
+            time: time.cast_exact::<PyFloat>()?.value(),
+            cls: pair.cls,
+            z,
+            r: pair.r_values.clone(),
+            detector: pair.detector,
+            source: source_name,
+            label: match label {
+                Some(label) => Some(Name::from(label.to_str()?)),
+                None => None,
+            },
+            clutter_rate: pair.clutter_rate_value,
             sensor,
-            time_std,
-        ];
-        let fields = PyTuple::new(py, values)?;
-        let measurement = self
-            .tuple_new
-            .bind(py)
-            .call1((self.measurement.bind(py), fields))?;
+            time_std: time_std_value,
+        };
+        let given = Given {
+            time: time.clone().unbind(),
+            cls: cls.clone().into_any().unbind(),
+            r: pair.r.clone_ref(py),
+            detector: detector.clone().into_any().unbind(),
+            source: source.map(|source| source.clone().into_any().unbind()),
+            label: label.map(|label| label.clone().into_any().unbind()),
+            clutter_rate: pair.clutter_rate.clone_ref(py),
+            time_std: time_std.unbind(),
+        };
         Ok(Some(Read {
-            measurement,
+            row,
+            given,
             time: time.clone(),
-            source: source.cloned(),
         }))
     }
 }
 
+/// A scan being read: its key and its detections so far.
+struct Building<'py> {
+    key: Bound<'py, PyTuple>,
+    rows: Vec<Measurement>,
+    given: Vec<Given>,
+}
+
 #[pymethods]
 impl PyDetectionReader {
-    /// `pairs`: `(class, detector) -> (R, trust_labels, clutter_rate, range, bounds)`,
-    /// with `bounds` the region's `(low, high)` for the pair's noise or `None`.
+    /// `pairs`: `(class, detector) -> (R, trust_labels, clutter_rate, range, bounds,
+    /// class index, detector index)`, with `bounds` the region's `(low, high)` for the
+    /// pair's noise or `None`, and the indices those of `engine`'s tables.
     #[new]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
+        engine: Bound<'_, PyAny>,
         measurement: Bound<'_, PyType>,
         detection: Bound<'_, PyType>,
         dimension: usize,
@@ -271,32 +295,47 @@ impl PyDetectionReader {
         default_detector: Bound<'_, PyString>,
         pairs: Bound<'_, PyDict>,
     ) -> PyResult<Self> {
-        type Given = (
+        type PairValues = (
             Py<PyAny>,
             bool,
-            Py<PyAny>,
+            f64,
             Option<f64>,
             Option<(Vec<f64>, Vec<f64>)>,
+            usize,
+            usize,
         );
         let mut table: HashMap<String, HashMap<String, Pair>> = HashMap::new();
         for (key, value) in pairs.iter() {
             let (cls, detector): (String, String) = key.extract()?;
-            let (r, trust_labels, clutter_rate, reach, bounds): Given = value.extract()?;
+            let (r, trust_labels, clutter_rate, reach, bounds, cls_index, detector_index): PairValues =
+                value.extract()?;
+            let r_values: Vec<f64> = r
+                .bind(py)
+                .call_method0("ravel")?
+                .call_method0("tolist")?
+                .extract()?;
             table.entry(cls).or_default().insert(
                 detector,
                 Pair {
                     r,
+                    r_values,
                     trust_labels,
-                    clutter_rate,
+                    clutter_rate: PyFloat::new(py, clutter_rate).into_any().unbind(),
+                    clutter_rate_value: clutter_rate,
+                    cls: cls_index,
+                    detector: detector_index,
                     reach,
                     bounds,
                 },
             );
         }
         Ok(PyDetectionReader {
-            measurement: measurement.unbind(),
+            makers: Arc::new(Makers {
+                measurement: measurement.unbind(),
+                tuple_new: py.get_type::<PyTuple>().getattr("__new__")?.unbind(),
+            }),
             detection: detection.unbind(),
-            tuple_new: py.get_type::<PyTuple>().getattr("__new__")?.unbind(),
+            engine: engine.unbind(),
             dim: dimension,
             max_time,
             max_time_std,
@@ -306,50 +345,71 @@ impl PyDetectionReader {
         })
     }
 
-    /// The batch's measurements (sequence numbers from `first_seq`) and the same
-    /// grouped by scan as `semwm.world._grouped` groups them (key `(time, source or
-    /// "")`, in order of first appearance), or `None` when a detection is not plain:
+    /// How many detections the batch holds (sequence numbers from `first_seq`) and its
+    /// scans as `semwm.world._grouped` groups them (key `(time, source or "")`, in order
+    /// of first appearance), each a `Scan`; or `None` when a detection is not plain:
     /// the specification reads that batch.
-    #[allow(clippy::type_complexity)]
     fn read<'py>(
         &self,
         py: Python<'py>,
         batch: &Bound<'py, PyList>,
         first_seq: u64,
-    ) -> PyResult<Option<(Bound<'py, PyList>, Bound<'py, PyDict>)>> {
-        let measurements = PyList::empty(py);
-        let scans = PyDict::new(py);
+    ) -> PyResult<Option<(usize, Bound<'py, PyDict>)>> {
+        let mut building: Vec<Building<'py>> = Vec::new();
+        // scan keys (time with -0.0 as 0.0, as a dict's keys compare; source) -> index
+        let mut index: HashMap<(u64, Name), usize> = HashMap::new();
         // the scan of the previous detection: a batch's detections come in runs
-        let mut current: Option<(Read<'py>, Bound<'py, PyList>)> = None;
-        for (index, item) in batch.iter().enumerate() {
-            let Some(read) = self.read_one(py, &item, first_seq + index as u64)? else {
+        let mut current: Option<(f64, Name, usize)> = None;
+        let mut last_source: Option<Name> = None;
+        for (offset, item) in batch.iter().enumerate() {
+            let seq = first_seq + offset as u64;
+            let Some(read) = self.read_one(py, &item, seq, &mut last_source)? else {
                 return Ok(None);
             };
-            measurements.append(&read.measurement)?;
-            if let Some((last, scan)) = &current {
-                let same_time = last.time.cast_exact::<PyFloat>()?.value()
-                    == read.time.cast_exact::<PyFloat>()?.value();
-                if same_time && last.source_text()? == read.source_text()? {
-                    scan.append(&read.measurement)?;
-                    continue;
+            let (time, source) = (read.row.time, read.row.source.clone());
+            let at = match &current {
+                Some((last_time, last_source, at))
+                    if *last_time == time && *last_source == source =>
+                {
+                    *at
                 }
-            }
-            let source = match &read.source {
-                Some(source) if !source.to_str()?.is_empty() => source.clone(),
-                _ => intern!(py, "").clone(),
-            };
-            let key = PyTuple::new(py, [read.time.clone(), source.into_any()])?;
-            let scan = match scans.get_item(&key)? {
-                Some(scan) => scan.cast_into::<PyList>()?,
-                None => {
-                    let scan = PyList::empty(py);
-                    scans.set_item(&key, &scan)?;
-                    scan
+                _ => {
+                    let bits = if time == 0.0 { 0.0f64 } else { time }.to_bits();
+                    match index.get(&(bits, source.clone())) {
+                        Some(&at) => at,
+                        None => {
+                            // the key as `_grouped` makes it: `(m.time, m.source or "")`
+                            let text = match &read.given.source {
+                                Some(given) if !source.is_empty() => given.bind(py).clone(),
+                                _ => intern!(py, "").clone().into_any(),
+                            };
+                            let key = PyTuple::new(py, [read.time.clone(), text])?;
+                            building.push(Building {
+                                key,
+                                rows: Vec::new(),
+                                given: Vec::new(),
+                            });
+                            index.insert((bits, source.clone()), building.len() - 1);
+                            building.len() - 1
+                        }
+                    }
                 }
             };
-            scan.append(&read.measurement)?;
-            current = Some((read, scan));
+            current = Some((time, source, at));
+            let scan = &mut building[at];
+            scan.rows.push(read.row);
+            scan.given.push(read.given);
         }
-        Ok(Some((measurements, scans)))
+        let scans = PyDict::new(py);
+        for scan in building {
+            let value = PyScan::new(
+                scan.rows,
+                scan.given,
+                self.makers.clone(),
+                self.engine.clone_ref(py),
+            );
+            scans.set_item(scan.key, Bound::new(py, value)?)?;
+        }
+        Ok(Some((batch.len(), scans)))
     }
 }
