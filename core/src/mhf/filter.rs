@@ -32,7 +32,7 @@ use crate::mhf::hypotheses::{fsum, prune, Cluster, Hypothesis, KeyMap, KeySet, M
 use crate::mhf::measurement::{Measurement, SensorView};
 use crate::mhf::predict::{predict, Predicted};
 use crate::mhf::rates::{watched, Name, ObservedRates, ScanCoverage, ScanReport, WatchedObject};
-use crate::mhf::similar::merge_similar;
+use crate::mhf::similar::merge_similar_in;
 use crate::mhf::state::{next_serial, Entry, Key, State, Version};
 use crate::mhf::tables::Tables;
 
@@ -587,7 +587,8 @@ impl Filter {
         if tables.merge_distance > 0.0 {
             for cluster in final_clusters.iter_mut().skip(expanded.untouched) {
                 if cluster.hypotheses.len() > 1 {
-                    let merged = merge_similar(
+                    let merged = merge_similar_in(
+                        &cluster.keys,
                         &cluster.hypotheses,
                         &table.versions,
                         &table.existence,

@@ -26,7 +26,6 @@
 //! NaN passes, and [`same_estimate`] keeps that difference ([`numpy_max`]).
 
 use std::cmp::Ordering;
-use std::collections::hash_map::Entry;
 use std::sync::Arc;
 
 use crate::error::{KernelError, KernelResult};
@@ -537,6 +536,81 @@ fn is_twin(a: &[Key], b: &[Key], same: &KeySet<(Key, Key)>) -> bool {
         .all(|(&key_a, &key_b)| key_a == key_b || same.contains(&(key_a, key_b)))
 }
 
+/// The groups of hypotheses holding the same objects (the same set of lineages):
+/// each hypothesis's group, groups numbered in order of first appearance, and each
+/// group's size. `keys`: every version the hypotheses hold, sorted. Each version's
+/// lineage is read once; a hypothesis's set is a bit mask of the cluster's lineages
+/// (a sorted list of them past 128).
+fn lineage_groups(
+    keys: &[Key],
+    hypotheses: &[Hypothesis],
+    versions: &KeyMap<Key, Arc<Version>>,
+) -> KernelResult<(Vec<usize>, Vec<usize>)> {
+    let mut index_of: KeyMap<u64, usize> = KeyMap::default();
+    index_of.reserve(keys.len());
+    let mut slots: Vec<usize> = Vec::with_capacity(keys.len());
+    for &key in keys {
+        let lineage = version_of(versions, key)?.lineage;
+        let next = index_of.len();
+        slots.push(*index_of.entry(lineage).or_insert(next));
+    }
+    let slot = |key: Key| -> KernelResult<usize> {
+        keys.binary_search(&key)
+            .map(|at| slots[at])
+            .map_err(|_| KernelError::Value(format!("version {key} is not among the cluster's")))
+    };
+    let mut group_at: Vec<usize> = Vec::with_capacity(hypotheses.len());
+    let mut sizes: Vec<usize> = Vec::new();
+    let mut join = |group: usize, sizes: &mut Vec<usize>| {
+        if group == sizes.len() {
+            sizes.push(0);
+        }
+        sizes[group] += 1;
+        group_at.push(group);
+    };
+    if index_of.len() <= 128 {
+        let mut group_of: KeyMap<u128, usize> = KeyMap::default();
+        group_of.reserve(hypotheses.len());
+        for h in hypotheses {
+            let mut held = 0u128;
+            for &key in &h.keys {
+                held |= 1u128 << slot(key)?;
+            }
+            let next = group_of.len();
+            join(*group_of.entry(held).or_insert(next), &mut sizes);
+        }
+    } else {
+        // each hypothesis's lineage slots, sorted and distinct, one after another
+        let mut held: Vec<usize> = Vec::new();
+        let mut spans: Vec<(usize, usize)> = Vec::with_capacity(hypotheses.len());
+        for h in hypotheses {
+            let start = held.len();
+            for &key in &h.keys {
+                held.push(slot(key)?);
+            }
+            held[start..].sort_unstable();
+            let mut end = start;
+            for at in start..held.len() {
+                if end == start || held[at] != held[end - 1] {
+                    held[end] = held[at];
+                    end += 1;
+                }
+            }
+            held.truncate(end);
+            spans.push((start, end));
+        }
+        let mut group_of: KeyMap<&[usize], usize> = KeyMap::default();
+        for &(start, end) in &spans {
+            let next = group_of.len();
+            join(
+                *group_of.entry(&held[start..end]).or_insert(next),
+                &mut sizes,
+            );
+        }
+    }
+    Ok((group_at, sizes))
+}
+
 /// `merge_similar`: the hypotheses (most probable first, normalised) with near-identical
 /// twins merged into the more probable one; `None` when nothing merges (the caller keeps
 /// its cluster as it is).
@@ -553,29 +627,34 @@ pub fn merge_similar(
     existence: &KeyMap<Key, f64>,
     max_distance: f64,
 ) -> KernelResult<Option<Vec<Hypothesis>>> {
+    let mut keys: Vec<Key> = hypotheses
+        .iter()
+        .flat_map(|h| h.keys.iter().copied())
+        .collect();
+    keys.sort_unstable();
+    keys.dedup();
+    merge_similar_in(&keys, hypotheses, versions, existence, max_distance)
+}
+
+/// [`merge_similar`] of a cluster's hypotheses, `keys` every version they hold, sorted
+/// (`Cluster::keys`).
+pub fn merge_similar_in(
+    keys: &[Key],
+    hypotheses: &[Hypothesis],
+    versions: &KeyMap<Key, Arc<Version>>,
+    existence: &KeyMap<Key, f64>,
+    max_distance: f64,
+) -> KernelResult<Option<Vec<Hypothesis>>> {
     if hypotheses.len() < 2 || max_distance <= 0.0 {
         return Ok(None);
     }
-    let mut group_of: KeyMap<Vec<u64>, usize> = KeyMap::default();
-    let mut groups: Vec<Vec<usize>> = Vec::new();
-    for (index, h) in hypotheses.iter().enumerate() {
-        let mut lineages: Vec<u64> = h
-            .keys
-            .iter()
-            .map(|&key| version_of(versions, key).map(|v| v.lineage))
-            .collect::<KernelResult<_>>()?;
-        lineages.sort_unstable();
-        lineages.dedup();
-        match group_of.entry(lineages) {
-            Entry::Occupied(entry) => groups[*entry.get()].push(index),
-            Entry::Vacant(entry) => {
-                entry.insert(groups.len());
-                groups.push(vec![index]);
-            }
-        }
+    let (group_at, sizes) = lineage_groups(keys, hypotheses, versions)?;
+    if sizes.iter().all(|&size| size == 1) {
+        return Ok(None); // no two hypotheses hold the same objects: the common scan
     }
-    if groups.iter().all(|members| members.len() == 1) {
-        return Ok(None);
+    let mut groups: Vec<Vec<usize>> = sizes.iter().map(|&size| Vec::with_capacity(size)).collect();
+    for (index, &group) in group_at.iter().enumerate() {
+        groups[group].push(index);
     }
     // versions of each lineage held by hypotheses that have a twin candidate
     let mut lineage_at: KeyMap<u64, usize> = KeyMap::default();
