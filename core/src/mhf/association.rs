@@ -449,7 +449,7 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
     for pair in pairs {
         let m = &measurements[pair.j];
         let timing = if timed {
-            let mut r = m.r.clone();
+            let mut r = m.r.to_vec();
             let v = predicted.velocity(pair.i);
             let sigma2 = m.time_std * m.time_std;
             for a in 0..d {

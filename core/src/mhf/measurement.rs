@@ -1,6 +1,8 @@
 //! A detection checked against the knowledge and ready for the MHF, and where a scan's
 //! sensor looked (`semwm/mhf/measurement.py`).
 
+use std::sync::Arc;
+
 use crate::mhf::existence::View;
 use crate::mhf::rates::Name;
 use crate::mhf::tables::{ClassId, DetectorId};
@@ -15,7 +17,7 @@ pub struct Measurement {
     /// `d`: the measured position.
     pub z: Vec<f64>,
     /// `d x d`: its measurement noise.
-    pub r: Vec<f64>,
+    pub r: Arc<[f64]>,
     pub detector: DetectorId,
     /// Its source, `""` for none (the Python engine's `m.source or ""`).
     pub source: Name,

@@ -358,7 +358,7 @@ impl PyEngine {
         let mut scan = Vec::with_capacity(measurements.len());
         // a batch's detections share their class's noise array and usually their source:
         // read each once (by identity; names by value)
-        let mut last_r: Option<(Bound<'_, PyAny>, Vec<f64>)> = None;
+        let mut last_r: Option<(Bound<'_, PyAny>, Arc<[f64]>)> = None;
         let mut last_source: Option<Name> = None;
         for (j, item) in measurements.iter().enumerate() {
             let not_one = |error: PyErr| {
@@ -381,7 +381,7 @@ impl PyEngine {
             let r = match &last_r {
                 Some((object, values)) if object.is(&r_object) => values.clone(),
                 _ => {
-                    let values = float_values(&r_object).map_err(not_one)?;
+                    let values: Arc<[f64]> = float_values(&r_object).map_err(not_one)?.into();
                     last_r = Some((r_object, values.clone()));
                     values
                 }

@@ -34,7 +34,7 @@ use crate::python::scan::{Given, Makers, PyScan};
 struct Pair {
     /// The shared, read-only noise array, and its values (row-major).
     r: Py<PyAny>,
-    r_values: Vec<f64>,
+    r_values: Arc<[f64]>,
     trust_labels: bool,
     clutter_rate: Py<PyAny>,
     clutter_rate_value: f64,
@@ -314,6 +314,7 @@ impl PyDetectionReader {
                 .call_method0("ravel")?
                 .call_method0("tolist")?
                 .extract()?;
+            let r_values: Arc<[f64]> = r_values.into();
             table.entry(cls).or_default().insert(
                 detector,
                 Pair {

@@ -146,7 +146,7 @@ impl PyScan {
                     m.time,
                     m.cls,
                     m.z.clone(),
-                    m.r.clone(),
+                    m.r.to_vec(),
                     m.detector,
                     m.source.to_string(),
                     m.label.as_ref().map(|label| label.to_string()),
