@@ -53,7 +53,7 @@ from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf import nearby
 from semwm.mhf.actions import Kick, apply_kick
-from semwm.mhf.core_engine import CoreState, as_python, as_python_book, track_of
+from semwm.mhf.core_engine import CoreBook, CoreState, as_python, as_python_book, track_of
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
 from semwm.mhf.predict import Predicted
@@ -540,6 +540,10 @@ class WorldModel:
     ) -> IngestResult:
         batch = as_batch(detections)
         read = self._reader.read(batch, self._seq) if self._reader is not None else None
+        if read is not None and sensor is None and len(read[1]) == 1 and self._hold == 0:
+            done = self._ingest_scan(read[0], read[1], len(batch))
+            if done is not None:
+                return done
         if read is not None and sensor is None:  # the common batch: its scans as read
             applied, skipped = read[0], list[IgnoredDetection]()
             grouped: tuple[dict[ScanKey, Sequence[Measurement]], dict[ScanKey, SensorView]]
@@ -582,6 +586,49 @@ class WorldModel:
             ignored=ignored,
             ignored_detections=tuple(skipped),
         )
+
+    def _ingest_scan(
+        self, applied: int, scans: dict[ScanKey, Sequence[Measurement]], size: int
+    ) -> IngestResult | None:
+        """:meth:`_ingest` of a batch the Rust engine's reader read whole into one scan,
+        without a sensor report or a hold, after every logged scan: what the general
+        path does (its checks, :meth:`_process_scans`, :meth:`_publish`), with no call
+        that case does not need. ``None`` (nothing done) when the batch is not that
+        case, or the state not the ``mht`` core's: the general path takes it."""
+        core = self._mhf._core
+        state, book = self._state, self._book
+        if (
+            core is None
+            or not self._mhf.mht
+            or type(state) is not CoreState
+            or state.engine is not core
+            or type(book) is not CoreBook
+            or self._tentative is not None
+            or self._pending
+        ):
+            return None
+        ((key, scan),) = scans.items()
+        log = self._log
+        if log and not log[-1].key < key:
+            return None  # a replay: the general path
+        time, latest = key[0], state.time
+        if latest is not None:
+            if time < latest - self.reorder_window - 1e-12:
+                raise OutOfOrderError(time, latest, self.reorder_window)
+            floor = self._replay_floor
+            if floor is not None and key <= floor[0]:
+                raise OutOfOrderError(time, latest, latest - floor[0][0], why=floor[1])
+        newest, earliest = self._newest, self._earliest
+        self._newest = time if newest is None or time > newest else newest
+        self._earliest = time if earliest is None or time < earliest else earliest
+        after, after_book = core.engine.process_and_advance(state.core, book.core, scan)
+        after_state = CoreState(after, core)
+        kept = [*log, _LoggedScan(key, scan, state, None, book)] if self.reorder_window > 0 else []
+        log, floor = self._trimmed(kept, after_state)
+        self._commit(after_state, log, CoreBook(after_book), floor)
+        self._publish()
+        self._seq += size
+        return IngestResult(applied=applied, time=after_state.time)
 
     def _read(
         self,
@@ -919,15 +966,21 @@ class WorldModel:
             state, book = self._step(state, book, scans[key], scan_view)
             if keep:
                 log.append(_LoggedScan(key, _frozen(scans[key]), before, scan_view, before_book))
+        log, floor = self._trimmed(log if keep else [], state)
+        return state, log, book, floor
+
+    def _trimmed(
+        self, log: list[_LoggedScan], state: StateView
+    ) -> tuple[list[_LoggedScan], _Floor | None]:
+        """The reorder log after a scan brought the state to ``state``: without the
+        scans older than the reorder window, and at most :attr:`max_reorder_scans` long;
+        with the replay floor, raised past the newest scan dropped to keep it so."""
         assert state.time is not None
         horizon = state.time - self.reorder_window
-        if keep:  # the log is in key (time) order: drop its head
-            cut = 0
-            while cut < len(log) and log[cut].key[0] < horizon:
-                cut += 1
-            log = log[cut:] if cut else log
-        else:
-            log = []
+        cut = 0  # the log is in key (time) order: drop its head
+        while cut < len(log) and log[cut].key[0] < horizon:
+            cut += 1
+        log = log[cut:] if cut else log
         floor = self._replay_floor
         if len(log) > self.max_reorder_scans:
             dropped = len(log) - self.max_reorder_scans
@@ -936,7 +989,7 @@ class WorldModel:
                 f"the reorder history holds at most {self.max_reorder_scans} scans",
             )
             log = log[dropped:]
-        return state, log, book, floor
+        return log, floor
 
     # ------------------------------------------------------------------ held scans
     @contextmanager
@@ -1052,7 +1105,7 @@ class WorldModel:
         state = self._state
         if core is not None and isinstance(state, CoreState) and state.engine is core:
             # the core gives the common case itself (core/src/python/engine.rs)
-            shown, unchanged = core.publish(
+            shown, unchanged = core.engine.publish(
                 state, self._published, self._ids, bool(self._lost), self._next_id
             )
             if unchanged is None:

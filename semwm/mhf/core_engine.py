@@ -26,7 +26,6 @@ from semwm.mhf.state import Cluster, Hypothesis, MHFState, StateView, Track
 
 if TYPE_CHECKING:
     from semwm import _core
-    from semwm._core import Published
     from semwm.knowledge.model import ResolvedClass
     from semwm.mhf.filter import MultipleHypothesisFilter
 
@@ -549,22 +548,6 @@ class CoreEngine:
         (``core/src/world.rs``); ``published`` the objects shown now by id, ``ids``
         theirs (lineage -> id)."""
         return self.engine.current(state, published, ids)
-
-    def publish(
-        self,
-        state: CoreState,
-        published: Mapping[int, Any],
-        ids: Mapping[int, int],
-        lost: bool,
-        next_id: int,
-    ) -> tuple[dict[int, VersionRef] | None, tuple[dict[int, int], Published, int] | None]:
-        """``WorldModel._publish`` of ``state`` with its common case in the core:
-        ``(current, unchanged)``, one of them ``None``. ``unchanged`` is what
-        ``_publish_unchanged`` makes (``ids``, ``published``, ``next_id``) when it
-        applies, ``published`` a table whose ``VersionRef`` values are made when read;
-        else the caller publishes ``current`` in general (``lost``: an id waits for its
-        object)."""
-        return self.engine.publish(state, published, ids, lost, next_id)
 
     def resolve(self, ref: VersionRef) -> Track:
         """The version ``ref`` names as a Python value."""

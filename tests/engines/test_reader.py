@@ -20,7 +20,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from semwm.detection import Detection, DetectionError
+from semwm.detection import Detection, DetectionError, OutOfOrderError
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.mhf.core_engine import as_python
@@ -228,19 +228,26 @@ def test_a_plain_batch_of_either_form_is_read() -> None:
 
 
 @pytest.mark.parametrize(
-    ("reorder_window", "hold"), [(0.0, 0.0), (0.5, 0.0), (0.5, 0.15)], ids=["now", "replay", "hold"]
+    ("reorder_window", "hold", "most"),
+    [(0.0, 0.0, 1000), (0.5, 0.0, 1000), (0.5, 0.0, 3), (0.5, 0.15, 1000)],
+    ids=["now", "replay", "short-log", "hold"],
 )
-def test_models_with_and_without_the_reader_agree(reorder_window: float, hold: float) -> None:
+def test_models_with_and_without_the_reader_agree(
+    reorder_window: float, hold: float, most: int
+) -> None:
     """The same batches, plain or not (ignored detections, refused batches), give the
     same answers and the same world with the reader as through the specification;
     with a reorder window, late batches replay the logged scans the reader read, and a
-    hold keeps them pending (their values are then read: ``semwm._core.Scan``)."""
+    hold keeps them pending (their values are then read: ``semwm._core.Scan``). A batch
+    the reader reads whole into one scan takes ``WorldModel._ingest_scan``: the same
+    reorder log, replay floor and times as the general path's."""
     rng = np.random.default_rng(3)
     fast, spec = (
         WorldModel(ROBOCUP, engine="rust", reorder_window=reorder_window, hold=hold)
         for _ in range(2)
     )
     spec._reader = None
+    fast.max_reorder_scans = spec.max_reorder_scans = most
     for step in range(40):
         late = reorder_window > 0 and rng.random() < 0.3
         time = max(0.0, step * 0.1 - (float(rng.uniform(0.05, 0.3)) if late else 0.0))
@@ -250,7 +257,7 @@ def test_models_with_and_without_the_reader_agree(reorder_window: float, hold: f
                 "time": time,
                 "class": str(rng.choice(["Ball", "Opponent", "Peer"])),
                 "position": [float(rng.uniform(-10, 10)), float(rng.uniform(-7, 7))],
-                "source": str(rng.choice(["r1", "r2"])),
+                "source": "r1" if step == 0 else str(rng.choice(["r1", "r2"])),
             }
             if rng.random() < 0.1:
                 item["class"] = "Unknown"
@@ -259,9 +266,17 @@ def test_models_with_and_without_the_reader_agree(reorder_window: float, hold: f
         for model in (fast, spec):
             try:
                 outcomes.append(model.ingest(batch))
-            except DetectionError as error:
+            except (DetectionError, OutOfOrderError) as error:  # refused: nothing changed
                 outcomes.append(str(error))
         assert outcomes[0] == outcomes[1]
+        assert [e.key for e in fast._log] == [e.key for e in spec._log]
+        assert fast._replay_floor == spec._replay_floor
+        assert (fast._newest, fast._earliest, fast._seq) == (
+            spec._newest,
+            spec._earliest,
+            spec._seq,
+        )
+        assert fast._ids == spec._ids and list(fast._published) == list(spec._published)
         a, b = fast.world(), spec.world()
         assert [(o.id, o.cls) for o in a.objects] == [(o.id, o.cls) for o in b.objects]
         for x, y in zip(a.objects, b.objects, strict=True):
@@ -269,6 +284,8 @@ def test_models_with_and_without_the_reader_agree(reorder_window: float, hold: f
     assert fast.replayed_scans == spec.replayed_scans
     if reorder_window > 0 and hold == 0:
         assert fast.replayed_scans > 0  # the late batches were replays
+    if most < 10:
+        assert fast._replay_floor is not None  # the short log dropped scans
     if hold > 0:
         assert fast.pending_scans == spec.pending_scans
 
@@ -304,3 +321,35 @@ def test_a_scan_reads_as_its_measurements_once() -> None:
 def _same_values(a: Measurement, b: Measurement) -> None:
     for name, x, y in zip(Measurement._fields, a, b, strict=True):
         assert np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y, name
+
+
+def _said(model: WorldModel, time: float, source: str | None = None) -> str:
+    """What ``model`` answers one detection at ``time``: its result, or why it refused."""
+    item: dict[str, Any] = {"time": time, "class": "Ball", "position": [1.0, 2.0]}
+    if source is not None:
+        item["source"] = source
+    try:
+        return repr(model.ingest([item]))
+    except OutOfOrderError as error:
+        return str(error)
+
+
+def test_the_one_scan_path_refuses_what_the_general_path_refuses() -> None:
+    """``WorldModel._ingest_scan`` checks a batch's time as ``_ingest`` does: older than
+    the reorder window allows, or at the replay floor a knowledge change sets."""
+    outcomes: list[list[str]] = []
+    for reader in (True, False):
+        model = WorldModel(ROBOCUP, engine="rust")
+        if not reader:
+            model._reader = None
+        # 1.05: older than the latest, and no reorder window
+        said = [_said(model, time) for time in (1.0, 1.1, 1.05, 1.2)]
+        model.replace_knowledge(ROBOCUP)  # the reorder window restarts at 1.2
+        said.append(_said(model, 1.2, "r1"))  # after (1.2, "") in key order: taken
+        # at the floor: refused (the first scan after the change took the general path:
+        # the state is now the new engine's, and this one takes the one-scan path)
+        said.append(_said(model, 1.2))
+        said.append(_said(model, 1.3))
+        outcomes.append(said)
+    assert outcomes[0] == outcomes[1]
+    assert sum("older than" in line for line in outcomes[0]) == 2, outcomes[0]
