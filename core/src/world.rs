@@ -12,6 +12,8 @@
 //! probable hypothesis does not hold both as shown, are one object whose existence is
 //! the sum of theirs (at most 1).
 
+use std::sync::Arc;
+
 use crate::filters::small::{mahalanobis_squared, slogdet};
 use crate::mhf::existence::inside_probability;
 use crate::mhf::hypotheses::{fsum, KeyMap, KeySet, TIE};
@@ -32,6 +34,11 @@ pub struct Summary {
     pub covariance: Vec<f64>,
     pub inside: f64,
 }
+
+/// Summaries of the versions a state held, by serial, kept from one call of [`current`]
+/// to the next (`WorldModel._summaries`): a version not changed since is not summarised
+/// again.
+pub type Summaries = KeyMap<u64, Arc<Summary>>;
 
 /// `_stored_summaries` of one version.
 pub fn summary(version: &Version, tables: &Tables) -> Summary {
@@ -110,6 +117,7 @@ pub fn current(
     tables: &Tables,
     shown: &KeySet<u64>,
     ids: &KeyMap<u64, i64>,
+    cache: &mut Summaries,
 ) -> Vec<(u64, Key)> {
     let version = |key: Key| &state.tracks[&key].version;
     if !tables.mht {
@@ -140,8 +148,10 @@ pub fn current(
     let floor = tables.min_existence;
     // sized once: at most one entry per stored version (no rehash as they fill)
     let versions = state.tracks.len();
-    let mut summaries: KeyMap<Key, Summary> = KeyMap::default();
+    let mut summaries: KeyMap<Key, Arc<Summary>> = KeyMap::default();
     summaries.reserve(versions);
+    let mut kept: Summaries = KeyMap::default();
+    kept.reserve(versions);
     let mut totals: Vec<(u64, f64)> = Vec::with_capacity(versions);
     let mut total_at: KeyMap<u64, usize> = KeyMap::default();
     total_at.reserve(versions);
@@ -171,7 +181,14 @@ pub fn current(
             let lineage = entry.version.lineage;
             let inside = summaries
                 .entry(key)
-                .or_insert_with(|| summary(&entry.version, tables))
+                .or_insert_with(|| {
+                    let made = match cache.get(&entry.serial) {
+                        Some(made) => made.clone(),
+                        None => Arc::new(summary(&entry.version, tables)),
+                    };
+                    kept.insert(entry.serial, made.clone());
+                    made
+                })
                 .inside;
             let present = entry.existence * inside;
             match total_at.get(&lineage) {
@@ -196,6 +213,7 @@ pub fn current(
             key: chosen[&lineage],
         })
         .collect();
+    *cache = kept;
     let merged = same_objects(marginals, state, tables, &summaries, shown, ids);
     merged
         .into_iter()
@@ -209,7 +227,7 @@ fn same_objects(
     marginals: Vec<Marginal>,
     state: &State,
     tables: &Tables,
-    summaries: &KeyMap<Key, Summary>,
+    summaries: &KeyMap<Key, Arc<Summary>>,
     shown: &KeySet<u64>,
     ids: &KeyMap<u64, i64>,
 ) -> Vec<Marginal> {

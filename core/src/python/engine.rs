@@ -9,7 +9,7 @@
 //! `Engine.publish`, which also gives publishing's common case).
 
 use std::collections::{BTreeMap, HashMap};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods,
@@ -30,6 +30,7 @@ use crate::python::published::{PyPublished, Row};
 use crate::python::rates::PyObservedRates;
 use crate::python::scan::PyScan;
 use crate::python::{run, PyClassFilter};
+use crate::world::Summaries;
 
 fn item<'py, T: FromPyObjectOwned<'py>>(dict: &Bound<'py, PyDict>, key: &str) -> PyResult<T> {
     let value = dict
@@ -270,6 +271,8 @@ pub struct PyEngine {
     detectors: HashMap<String, usize>,
     /// the class names as Python strings, by index (each `VersionRef` shares its class's)
     names: Vec<Py<PyString>>,
+    /// the versions' summaries the last published world used (`world::Summaries`)
+    summaries: Arc<Mutex<Summaries>>,
 }
 
 /// A version of a core state, named without making its Python value
@@ -447,8 +450,13 @@ impl PyEngine {
         let core: PyRef<'_, PyState> = state.getattr("core")?.extract()?;
         let filter = self.filter.clone();
         let held = core.state.clone();
+        let summaries = self.summaries.clone();
         run(state.py(), "Engine.current", move || {
-            let pairs = crate::world::current(&held, &filter.tables, &shown, ids);
+            // a panic while it was held leaves summaries of versions, each whole
+            let mut cache = summaries
+                .lock()
+                .unwrap_or_else(|poisoned| poisoned.into_inner());
+            let pairs = crate::world::current(&held, &filter.tables, &shown, ids, &mut cache);
             Ok(pairs
                 .into_iter()
                 .map(|(lineage, key)| {
@@ -606,6 +614,7 @@ impl PyEngine {
             classes,
             detectors,
             names,
+            summaries: Arc::default(),
         })
     }
 
