@@ -590,7 +590,8 @@ fn expand(
     let floor = update_floor(&hypotheses, option, !copies.is_empty(), settings);
     let mut born_at: KeyMap<u64, u64> = KeyMap::default(); // birth weight -> version (mht)
                                                            // each hypothesis's children: clutter or new, and each update it allows
-    let mut children = Merged::with_capacity(hypotheses.len() * (2 + option.existing.len()));
+    let mut children =
+        Merged::with_capacity((hypotheses.len() * (2 + option.existing.len())).min(64));
     for h in &hypotheses {
         let keys = &h.keys;
         let (mut birth_rate, mut birth_log) = (option.new_rate, option.new_log);
