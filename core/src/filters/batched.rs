@@ -243,11 +243,55 @@ pub fn combine(
     }
     for a in 0..n {
         for b in 0..n {
-            let weighted: f64 = (0..m).map(|j| mu[j] * p[j * nn + a * n + b]).sum();
-            let spread: f64 = (0..m)
-                .map(|j| mu[j] * (x[j * n + a] - x_hat[a]) * (x[j * n + b] - x_hat[b]))
-                .sum();
-            p_hat[a * n + b] = weighted + spread;
+            p_hat[a * n + b] = combined_entry(x, p, mu, m, n, x_hat, a, b);
+        }
+    }
+}
+
+/// Entry `(a, b)` of [`combine`]'s `P^` (`x_hat` the combined mean).
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn combined_entry(
+    x: &[f64],
+    p: &[f64],
+    mu: &[f64],
+    m: usize,
+    n: usize,
+    x_hat: &[f64],
+    a: usize,
+    b: usize,
+) -> f64 {
+    let nn = n * n;
+    let weighted: f64 = (0..m).map(|j| mu[j] * p[j * nn + a * n + b]).sum();
+    let spread: f64 = (0..m)
+        .map(|j| mu[j] * (x[j * n + a] - x_hat[a]) * (x[j * n + b] - x_hat[b]))
+        .sum();
+    weighted + spread
+}
+
+/// [`combine`]'s mean `x^` (`n`) and the leading `d x d` block of its `P^` (the
+/// position's covariance), the same values entry by entry, without the rest of `P^`.
+pub fn combine_position(
+    x: &[f64],
+    p: &[f64],
+    mu: &[f64],
+    (m, n, d): (usize, usize, usize),
+    x_hat: &mut [f64],
+    p_block: &mut [f64],
+) {
+    if m == 1 {
+        x_hat.copy_from_slice(&x[..n]);
+        for a in 0..d {
+            p_block[a * d..(a + 1) * d].copy_from_slice(&p[a * n..a * n + d]);
+        }
+        return;
+    }
+    for a in 0..n {
+        x_hat[a] = (0..m).map(|j| mu[j] * x[j * n + a]).sum();
+    }
+    for a in 0..d {
+        for b in 0..d {
+            p_block[a * d + b] = combined_entry(x, p, mu, m, n, x_hat, a, b);
         }
     }
 }
@@ -255,6 +299,28 @@ pub fn combine(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn combine_position_gives_combines_leading_block_bit_for_bit() {
+        // modes of a 2-D constant-velocity IMM and a 3-D one, arbitrary values
+        for (m, n, d) in [(1, 4, 2), (2, 4, 2), (3, 6, 3), (2, 2, 2)] {
+            let value = |k: usize| ((k * 7919 % 1009) as f64 - 500.0) / 97.0;
+            let x: Vec<f64> = (0..m * n).map(value).collect();
+            let p: Vec<f64> = (0..m * n * n).map(|k| value(k + 31)).collect();
+            let total: f64 = (0..m).map(|j| 1.0 + j as f64).sum();
+            let mu: Vec<f64> = (0..m).map(|j| (1.0 + j as f64) / total).collect();
+            let (mut mean, mut full) = (vec![0.0; n], vec![0.0; n * n]);
+            combine(&x, &p, &mu, m, n, &mut mean, &mut full);
+            let (mut position_mean, mut block) = (vec![0.0; n], vec![0.0; d * d]);
+            combine_position(&x, &p, &mu, (m, n, d), &mut position_mean, &mut block);
+            assert_eq!(position_mean, mean);
+            for a in 0..d {
+                for b in 0..d {
+                    assert_eq!(block[a * d + b].to_bits(), full[a * n + b].to_bits());
+                }
+            }
+        }
+    }
 
     #[test]
     fn one_dimensional_kalman_update_is_the_scalar_formula() {

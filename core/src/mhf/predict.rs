@@ -204,13 +204,16 @@ pub fn predict(versions: &[Arc<Version>], time: f64, tables: &Tables) -> KernelR
                     mu: mu[row * m..(row + 1) * m].to_vec(),
                 })
             };
-            let (mean, full) = combined(&state);
+            let mut mean = vec![0.0; n];
+            batched::combine_position(
+                &state.x,
+                &state.p,
+                &state.mu,
+                (state.modes, n, d),
+                &mut mean,
+                &mut covariance[i * d * d..(i + 1) * d * d],
+            );
             position[i * d..(i + 1) * d].copy_from_slice(&mean[..d]);
-            for a in 0..d {
-                for b in 0..d {
-                    covariance[i * d * d + a * d + b] = full[a * n + b];
-                }
-            }
             rows[i] = Some(Row {
                 version: version.clone(),
                 state,
