@@ -478,8 +478,7 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
     // one update batch per filter shape, in order of first appearance
     let mut shapes: Vec<((usize, usize), Vec<usize>)> = Vec::new();
     for (p, (pair, _)) in passed.iter().enumerate() {
-        let state = &predicted.rows[pair.i].state;
-        let shape = (state.modes, state.size);
+        let shape = predicted.rows[pair.i].shape();
         match shapes.iter_mut().find(|(s, _)| *s == shape) {
             Some((_, members)) => members.push(p),
             None => shapes.push((shape, vec![p])),
@@ -493,10 +492,10 @@ fn existing(inputs: &Inputs<'_>, next_key: &mut Key) -> KernelResult<Vec<Vec<Upd
             let r: &[f64] = timing.as_deref().unwrap_or(&m.r);
             let row = &predicted.rows[i];
             let old = &row.version;
-            let (modes, size) = (row.state.modes, row.state.size);
-            let mut x = row.state.x.clone();
-            let mut covariance = row.state.p.clone();
-            let mut mu = row.state.mu.clone();
+            let (modes, size) = row.shape();
+            let mut x = row.x().to_vec();
+            let mut covariance = row.p().to_vec();
+            let mut mu = row.mu().to_vec();
             let mut log_lik =
                 batched::update(&mut x, &mut covariance, &mut mu, &m.z, r, modes, size, d)?;
             if !mht {

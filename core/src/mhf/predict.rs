@@ -14,10 +14,62 @@ use crate::mhf::tables::Tables;
 #[derive(Debug, Clone)]
 pub struct Row {
     pub version: Arc<Version>,
-    /// The predicted filter state (the version's own where no time passed).
-    pub state: Arc<FilterState>,
+    /// Where its predicted filter state is: its class's batch and its place in it, or
+    /// `None` for the version's own (no time passed). Read with [`Row::x`], [`Row::p`],
+    /// [`Row::mu`]: a state is made only for the versions a detection updates.
+    batch: Option<(Arc<Batch>, usize)>,
     /// `n`: the combined state mean.
     pub mean: Vec<f64>,
+}
+
+/// The predicted states of one class's versions, stacked (`m` modes of `n` states).
+#[derive(Debug)]
+struct Batch {
+    modes: usize,
+    size: usize,
+    x: Vec<f64>,
+    p: Vec<f64>,
+    mu: Vec<f64>,
+}
+
+impl Row {
+    /// `(modes, size)` of the predicted state.
+    pub fn shape(&self) -> (usize, usize) {
+        match &self.batch {
+            Some((batch, _)) => (batch.modes, batch.size),
+            None => (self.version.state.modes, self.version.state.size),
+        }
+    }
+
+    /// The predicted state's means, `m x n`.
+    pub fn x(&self) -> &[f64] {
+        match &self.batch {
+            Some((batch, row)) => {
+                let width = batch.modes * batch.size;
+                &batch.x[row * width..(row + 1) * width]
+            }
+            None => &self.version.state.x,
+        }
+    }
+
+    /// The predicted state's covariances, `m x n x n`.
+    pub fn p(&self) -> &[f64] {
+        match &self.batch {
+            Some((batch, row)) => {
+                let width = batch.modes * batch.size * batch.size;
+                &batch.p[row * width..(row + 1) * width]
+            }
+            None => &self.version.state.p,
+        }
+    }
+
+    /// The predicted state's mode probabilities, `m`.
+    pub fn mu(&self) -> &[f64] {
+        match &self.batch {
+            Some((batch, row)) => &batch.mu[row * batch.modes..(row + 1) * batch.modes],
+            None => &self.version.state.mu,
+        }
+    }
 }
 
 /// Object versions predicted to one time, in the order they were given, with the
@@ -189,36 +241,35 @@ pub fn predict(versions: &[Arc<Version>], time: f64, tables: &Tables) -> KernelR
             dt.push(time - version.time);
         }
         filter.predict(&mut x, &mut p, &mut mu, &dt)?;
+        let batch = Arc::new(Batch {
+            modes: m,
+            size: n,
+            x,
+            p,
+            mu,
+        });
         for (row, &i) in members.iter().enumerate() {
             let version = &versions[i];
             let moved = dt[row] > 0.0;
             let unchanged = version.state.modes == m && version.state.size == n && !moved;
-            let state = if unchanged {
-                version.state.clone()
-            } else {
-                Arc::new(FilterState {
-                    modes: m,
-                    size: n,
-                    x: x[row * m * n..(row + 1) * m * n].to_vec(),
-                    p: p[row * m * n * n..(row + 1) * m * n * n].to_vec(),
-                    mu: mu[row * m..(row + 1) * m].to_vec(),
-                })
+            let mut predicted = Row {
+                version: version.clone(),
+                batch: (!unchanged).then(|| (batch.clone(), row)),
+                mean: vec![0.0; n],
             };
-            let mut mean = vec![0.0; n];
+            let (modes, _) = predicted.shape();
+            let mut mean = std::mem::take(&mut predicted.mean);
             batched::combine_position(
-                &state.x,
-                &state.p,
-                &state.mu,
-                (state.modes, n, d),
+                predicted.x(),
+                predicted.p(),
+                predicted.mu(),
+                (modes, n, d),
                 &mut mean,
                 &mut covariance[i * d * d..(i + 1) * d * d],
             );
             position[i * d..(i + 1) * d].copy_from_slice(&mean[..d]);
-            rows[i] = Some(Row {
-                version: version.clone(),
-                state,
-                mean,
-            });
+            predicted.mean = mean;
+            rows[i] = Some(predicted);
         }
     }
     Ok(Predicted {
