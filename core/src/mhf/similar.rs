@@ -25,6 +25,7 @@
 //! is at most t". The specification's `same_estimate` tests `max > t` instead, which a
 //! NaN passes, and [`same_estimate`] keeps that difference ([`numpy_max`]).
 
+use std::cell::OnceCell;
 use std::cmp::Ordering;
 use std::sync::Arc;
 
@@ -342,11 +343,13 @@ pub fn same_estimate(
 
 /// What the batched test reads of one version's covariances: whether every mode's
 /// determinant is positive (`valid`), each mode's `log |P|`, and when valid each mode's
-/// `P^-1` (`_same_in`'s `slogdet` and `inv`).
+/// `P^-1` (`_same_in`'s `slogdet` and `inv`), made when a comparison first needs it.
 struct Covariances {
     valid: bool,
     log_det: Vec<f64>,
-    inverse: Vec<f64>,
+    n: usize,
+    factors: Vec<Option<Lu>>,
+    inverse: OnceCell<Vec<f64>>,
 }
 
 impl Covariances {
@@ -364,23 +367,28 @@ impl Covariances {
                 None => (0.0, f64::NEG_INFINITY),
             })
             .collect();
-        let valid = dets.iter().all(|&(sign, _)| sign > 0.0);
-        let mut inverse = Vec::new();
-        if valid {
-            // (the specification inverts the identity in place of an invalid one, and
-            // masks the result: nothing to compute here)
-            inverse = vec![0.0; state.p.len()];
-            for (lu, into) in factors.iter().zip(inverse.chunks_exact_mut(n * n)) {
+        Covariances {
+            valid: dets.iter().all(|&(sign, _)| sign > 0.0),
+            log_det: dets.into_iter().map(|(_, log_det)| log_det).collect(),
+            n,
+            factors,
+            inverse: OnceCell::new(),
+        }
+    }
+
+    /// Each mode's `P^-1`, `m x n x n` (only asked of a valid one: the specification
+    /// inverts the identity in place of an invalid one, and masks the result).
+    fn inverse(&self) -> &[f64] {
+        self.inverse.get_or_init(|| {
+            let nn = self.n * self.n;
+            let mut inverse = vec![0.0; self.factors.len() * nn];
+            for (lu, into) in self.factors.iter().zip(inverse.chunks_exact_mut(nn)) {
                 if let Some(lu) = lu {
                     lu.inverse(into);
                 }
             }
-        }
-        Covariances {
-            valid,
-            log_det: dets.into_iter().map(|(_, log_det)| log_det).collect(),
-            inverse,
-        }
+            inverse
+        })
     }
 }
 
@@ -418,26 +426,29 @@ fn batched_same(
     let (m, n) = (sa.modes, sa.size);
     let within = |p: f64, q: f64| (p - q).abs() <= PROBABILITY_TOLERANCE;
     let near = || {
+        let inverses = covariances_a.inverse();
         (0..m).all(|mode| {
             let delta = mode_delta(sa, sb, mode);
-            let inverse = &covariances_a.inverse[mode * n * n..(mode + 1) * n * n];
+            let inverse = &inverses[mode * n * n..(mode + 1) * n * n];
             quadratic_form(&delta[..n], inverse, n) <= max_distance
         })
     };
+    // every test is a plain condition: the cheap ones first, the one that needs an
+    // inverse last (the specification's `&` of the same conditions)
     Ok(covariances_a.valid
         && covariances_b.valid
-        && near()
-        && covariances_a
-            .log_det
-            .iter()
-            .zip(&covariances_b.log_det)
-            .all(|(la, lb)| (la - lb).abs() <= LOG_DET_TOLERANCE)
         && within(existence_a, existence_b)
         && sa.mu.iter().zip(&sb.mu).all(|(&p, &q)| within(p, q))
         && a.class_probs
             .iter()
             .zip(b.class_probs.iter())
-            .all(|(&p, &q)| within(p, q)))
+            .all(|(&p, &q)| within(p, q))
+        && covariances_a
+            .log_det
+            .iter()
+            .zip(&covariances_b.log_det)
+            .all(|(la, lb)| (la - lb).abs() <= LOG_DET_TOLERANCE)
+        && near())
 }
 
 /// `_same_pairs`: the ordered key pairs `(a, b)`, `a != b`, of versions of one lineage
