@@ -208,11 +208,14 @@ def core_reader(
     detection is plain, in one pass (its ``read`` answers ``None`` for any other batch,
     which then takes the specification's path). It is handed what this module computes:
     each (class, detector) pair's :func:`_resolved` values, its detector's range and
-    :func:`region_bounds` for its noise, and the indices of ``engine``'s tables, for
-    which it reads each scan's rows (a ``semwm._core.Scan``)."""
+    :func:`region_bounds` for its noise, the gate of :func:`out_of_range`'s margin, and
+    the indices of ``engine``'s tables, for which it reads each scan's rows (a
+    ``semwm._core.Scan``)."""
     from semwm import _core
 
     pairs: dict[tuple[str, str], Any] = {}
+    p = knowledge.world.gate_probability
+    gate = _line_of_sight_gate(p) if p < 1.0 else None  # out_of_range's margin
     for cls in knowledge.classes:
         for detector, spec in knowledge.detectors.items():
             pair = _resolved(cls, detector, knowledge, factory)
@@ -225,6 +228,7 @@ def core_reader(
                 bounds,
                 engine.index[cls],
                 engine.detectors[detector],
+                gate,
             )
     return _core.DetectionReader(
         engine.engine,

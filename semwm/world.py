@@ -540,12 +540,19 @@ class WorldModel:
     ) -> IngestResult:
         batch = as_batch(detections)
         read = self._reader.read(batch, self._seq) if self._reader is not None else None
+        outside: list[IgnoredDetection] = []  # what the reader left to place, if ignored
+        if read is not None and read[2]:
+            placed = None if sensor is not None else self._ignored_apart(batch, read[2])
+            if placed is None:
+                read = None  # one is used after all, or a sensor report: the specification
+            else:
+                outside = placed
         if read is not None and sensor is None and len(read[1]) == 1 and self._hold == 0:
-            done = self._ingest_scan(read[0], read[1], len(batch))
+            done = self._ingest_scan(read[0], read[1], len(batch), outside)
             if done is not None:
                 return done
         if read is not None and sensor is None:  # the common batch: its scans as read
-            applied, skipped = read[0], list[IgnoredDetection]()
+            applied, skipped = read[0], outside
             grouped: tuple[dict[ScanKey, Sequence[Measurement]], dict[ScanKey, SensorView]]
             grouped = (read[1], {})
             view = None
@@ -588,7 +595,11 @@ class WorldModel:
         )
 
     def _ingest_scan(
-        self, applied: int, scans: dict[ScanKey, Sequence[Measurement]], size: int
+        self,
+        applied: int,
+        scans: dict[ScanKey, Sequence[Measurement]],
+        size: int,
+        skipped: list[IgnoredDetection],
     ) -> IngestResult | None:
         """:meth:`_ingest` of a batch the Rust engine's reader read whole into one scan,
         without a sensor report or a hold, after every logged scan: what the general
@@ -628,12 +639,32 @@ class WorldModel:
         self._commit(after_state, log, CoreBook(after_book), floor)
         self._publish()
         self._seq += size
-        return IngestResult(applied=applied, time=after_state.time)
+        return IngestResult(applied, after_state.time, len(skipped), tuple(skipped))
+
+    def _ignored_apart(
+        self, batch: list[DetectionInput], indices: list[int]
+    ) -> list[IgnoredDetection] | None:
+        """Why each detection ``indices`` of a batch the reader read otherwise is not used
+        (:meth:`_ignored`, each parsed and checked alone, numbered as in its batch); ``None``
+        when one is used after all (within the margin :meth:`_ignored` allows beyond the
+        reader's bounds) or does not check: the batch then takes the specification's path."""
+        skipped = []
+        for index in indices:
+            try:
+                parsed = parse([batch[index]])
+                m = check(parsed, self._knowledge, self._mhf.factory, self._seq + index)[0]
+            except DetectionError:
+                return None
+            why = self._ignored(parsed[0], m, index, self._region_bounds)
+            if why is None:
+                return None
+            skipped.append(why)
+        return skipped
 
     def _read(
         self,
         batch: list[DetectionInput],
-        read: tuple[int, Mapping[ScanKey, Sequence[Measurement]]] | None = None,
+        read: tuple[int, Mapping[ScanKey, Sequence[Measurement]], list[int]] | None = None,
     ) -> tuple[list[Measurement], list[Measurement], list[IgnoredDetection]]:
         """A batch's measurements, those used, and why each other detection is not.
 
@@ -643,6 +674,7 @@ class WorldModel:
         same for a batch of plain detections in one pass (``read``: its answer, the
         batch's scans; docs/engines.md, "The boundary"); all of them are used."""
         if read is not None:  # every detection plain, numbered in the batch's order
+            assert not read[2], "the reader left detections to place: the specification's"
             measurements = sorted(
                 (m for scan in read[1].values() for m in scan), key=attrgetter("seq")
             )

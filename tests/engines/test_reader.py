@@ -109,15 +109,16 @@ def detections(draw: st.DrawFn, knowledge: Any) -> tuple[Any, bool]:
 
 def _specification(
     model: WorldModel, batch: list[Any], first_seq: int
-) -> tuple[list[Measurement], int] | None:
-    """The specification's measurements used and how many it ignores (``None``: refused)."""
+) -> tuple[list[Measurement], list[int]] | None:
+    """The specification's measurements used and the indices of those it ignores
+    (``None``: refused)."""
     try:
         parsed = parse(as_batch(batch))
         measurements = check(parsed, model.knowledge, model._mhf.factory, first_seq)
     except DetectionError:
         return None
     used, skipped = model._placed(parsed, measurements)
-    return used, len(skipped)
+    return used, [why.index for why in skipped]
 
 
 def _same(read: Measurement, expected: Measurement) -> None:
@@ -145,11 +146,15 @@ def test_the_reader_makes_what_the_specification_makes(knowledge: Any, data: Any
     if answer is None:
         assert any(odd for _, odd in drawn), f"a plain batch was given back: {batch}"
         return
-    count, scans = answer
+    count, scans, unplaced = answer
     read = _in_batch_order(scans)
     assert expected is not None, "the reader took a batch the specification refuses"
     used, ignored = expected
-    assert ignored == 0, "the reader took a batch the specification ignores part of"
+    # the reader leaves out exactly what the specification ignores (WorldModel._ignored
+    # then says why, detection by detection)
+    assert unplaced == ignored, f"left {unplaced}, the specification ignores {ignored}"
+    assert not unplaced or any(odd for _, odd in drawn), f"a plain detection left: {batch}"
+    used = [m for m in used if m.seq - first_seq not in unplaced]
     assert count == len(read) == len(used)
     for a, b in zip(read, used, strict=True):
         _same(a, b)
@@ -214,9 +219,9 @@ def test_a_plain_batch_of_either_form_is_read() -> None:
     ]  # fmt: skip
     answer = reader.read(batch, 7)
     assert answer is not None
-    count, scans = answer
+    count, scans, unplaced = answer
     read = _in_batch_order(scans)
-    assert count == 2
+    assert count == 2 and unplaced == []
     assert list(scans) == [(1.0, "")] and scans[1.0, ""] == read  # one scan, no source
     assert [m.seq for m in read] == [7, 8]
     assert [m.label for m in read] == [None, "me"]
@@ -247,6 +252,15 @@ def test_models_with_and_without_the_reader_agree(
         for _ in range(2)
     )
     spec._reader = None
+    placed: list[bool] = []  # per batch with detections the reader left: all ignored?
+    apart = fast._ignored_apart
+
+    def counted(batch: list[Any], indices: list[int]) -> Any:
+        answer = apart(batch, indices)
+        placed.append(answer is not None)
+        return answer
+
+    fast._ignored_apart = counted  # type: ignore[method-assign]
     fast.max_reorder_scans = spec.max_reorder_scans = most
     for step in range(40):
         late = reorder_window > 0 and rng.random() < 0.3
@@ -256,11 +270,16 @@ def test_models_with_and_without_the_reader_agree(
             item: dict[str, Any] = {
                 "time": time,
                 "class": str(rng.choice(["Ball", "Opponent", "Peer"])),
-                "position": [float(rng.uniform(-10, 10)), float(rng.uniform(-7, 7))],
+                # the region is [-9, 9] x [-6, 6]: some within its margin, some beyond
+                "position": [float(rng.uniform(-12, 12)), float(rng.uniform(-7, 7))],
                 "source": "r1" if step == 0 else str(rng.choice(["r1", "r2"])),
             }
             if rng.random() < 0.1:
                 item["class"] = "Unknown"
+            if rng.random() < 0.3:  # seen from about its detector's range of 5 m, either side
+                away = float(rng.uniform(4.6, 7.0))
+                x, y = item["position"]
+                item["sensor_position"] = [x - away, y]
             batch.append(item)
         outcomes = []
         for model in (fast, spec):
@@ -282,6 +301,9 @@ def test_models_with_and_without_the_reader_agree(
         for x, y in zip(a.objects, b.objects, strict=True):
             assert np.array_equal(x.position, y.position)
     assert fast.replayed_scans == spec.replayed_scans
+    # batches with detections out of the region or beyond reach (some within the
+    # margin: used): read by the reader, which leaves out just those ignored
+    assert placed and all(placed), placed
     if reorder_window > 0 and hold == 0:
         assert fast.replayed_scans > 0  # the late batches were replays
     if most < 10:

@@ -25,7 +25,7 @@ use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyFloat, PyList, PyString, PyTuple, PyType};
 
-use crate::mhf::measurement::{within_bounds, within_reach, Measurement};
+use crate::mhf::measurement::{within_bounds, within_reach_or_margin, Measurement};
 use crate::mhf::rates::Name;
 use crate::python::scan::{Given, Makers, PyScan};
 
@@ -42,6 +42,8 @@ struct Pair {
     cls: usize,
     detector: usize,
     reach: Option<f64>,
+    /// `out_of_range`'s one-dimensional gate quantile (`None`: no margin).
+    gate: Option<f64>,
     /// `semwm.validation.region_bounds`: `None` without a region.
     bounds: Option<(Vec<f64>, Vec<f64>)>,
 }
@@ -147,15 +149,15 @@ pub struct PyDetectionReader {
 }
 
 impl PyDetectionReader {
-    /// One plain detection read, or `None`. `last_source`: the previous detection's
-    /// source name, shared when this one names the same.
+    /// One detection read, or `None` when it is not plain. `last_source`: the previous
+    /// detection's source name, shared when this one names the same.
     fn read_one<'py>(
         &self,
         py: Python<'py>,
         item: &Bound<'py, PyAny>,
         seq: u64,
         last_source: &mut Option<Name>,
-    ) -> PyResult<Option<Read<'py>>> {
+    ) -> PyResult<Option<Reading<'py>>> {
         let fields = if let Ok(dict) = item.cast_exact::<PyDict>() {
             Fields::of(dict, "class")?
         } else if item.get_type().is(self.detection.bind(py)) {
@@ -215,14 +217,19 @@ impl PyDetectionReader {
         let sensor = match &fields.sensor {
             None => None,
             Some(value) => match finite_vector(value, self.dim) {
-                Some(sensor) if within_reach(&z, &sensor, pair.reach) => Some(sensor),
-                _ => return Ok(None),
+                Some(sensor) => Some(sensor),
+                None => return Ok(None),
             },
         };
-        if let Some((low, high)) = &pair.bounds {
-            if !within_bounds(&z, low, high) {
-                return Ok(None);
-            }
+        let reached = sensor.as_ref().is_none_or(|sensor| {
+            within_reach_or_margin(&z, sensor, pair.reach, &pair.r_values, pair.gate)
+        });
+        let inside = pair
+            .bounds
+            .as_ref()
+            .is_none_or(|(low, high)| within_bounds(&z, low, high));
+        if !(reached && inside) {
+            return Ok(Some(Reading::Unplaced));
         }
         let label = match label {
             Some(label) if pair.trust_labels => Some(label),
@@ -262,12 +269,21 @@ impl PyDetectionReader {
             clutter_rate: pair.clutter_rate.clone_ref(py),
             time_std: time_std.unbind(),
         };
-        Ok(Some(Read {
+        Ok(Some(Reading::Plain(Read {
             row,
             given,
             time: time.clone(),
-        }))
+        })))
     }
+}
+
+/// What the reader makes of a plain detection: its row, or that the specification
+/// must place it (beyond its detector's reach of its sensor or outside the region's
+/// bounds for its noise: `WorldModel._ignored` decides whether it is used).
+#[allow(clippy::large_enum_variant)] // made and taken apart once per detection: no box
+enum Reading<'py> {
+    Plain(Read<'py>),
+    Unplaced,
 }
 
 /// A scan being read: its key and its detections so far.
@@ -303,11 +319,12 @@ impl PyDetectionReader {
             Option<(Vec<f64>, Vec<f64>)>,
             usize,
             usize,
+            Option<f64>,
         );
         let mut table: HashMap<String, HashMap<String, Pair>> = HashMap::new();
         for (key, value) in pairs.iter() {
             let (cls, detector): (String, String) = key.extract()?;
-            let (r, trust_labels, clutter_rate, reach, bounds, cls_index, detector_index): PairValues =
+            let (r, trust_labels, clutter_rate, reach, bounds, cls_index, detector_index, gate): PairValues =
                 value.extract()?;
             let r_values: Vec<f64> = r
                 .bind(py)
@@ -326,6 +343,7 @@ impl PyDetectionReader {
                     cls: cls_index,
                     detector: detector_index,
                     reach,
+                    gate,
                     bounds,
                 },
             );
@@ -346,26 +364,34 @@ impl PyDetectionReader {
         })
     }
 
-    /// How many detections the batch holds (sequence numbers from `first_seq`) and its
-    /// scans as `semwm.world._grouped` groups them (key `(time, source or "")`, in order
-    /// of first appearance), each a `Scan`; or `None` when a detection is not plain:
-    /// the specification reads that batch.
+    /// How many detections of the batch it read (sequence numbers from `first_seq`),
+    /// their scans as `semwm.world._grouped` groups them (key `(time, source or "")`,
+    /// in order of first appearance), each a `Scan`, and the indices of the plain
+    /// detections it left to the specification to place (`Reading::Unplaced`); or
+    /// `None` when a detection is not plain: the specification reads that batch.
+    #[allow(clippy::type_complexity)]
     fn read<'py>(
         &self,
         py: Python<'py>,
         batch: &Bound<'py, PyList>,
         first_seq: u64,
-    ) -> PyResult<Option<(usize, Bound<'py, PyDict>)>> {
+    ) -> PyResult<Option<(usize, Bound<'py, PyDict>, Vec<usize>)>> {
         let mut building: Vec<Building<'py>> = Vec::new();
         // scan keys (time with -0.0 as 0.0, as a dict's keys compare; source) -> index
         let mut index: HashMap<(u64, Name), usize> = HashMap::new();
         // the scan of the previous detection: a batch's detections come in runs
         let mut current: Option<(f64, Name, usize)> = None;
         let mut last_source: Option<Name> = None;
+        let mut unplaced: Vec<usize> = Vec::new();
         for (offset, item) in batch.iter().enumerate() {
             let seq = first_seq + offset as u64;
-            let Some(read) = self.read_one(py, &item, seq, &mut last_source)? else {
-                return Ok(None);
+            let read = match self.read_one(py, &item, seq, &mut last_source)? {
+                None => return Ok(None),
+                Some(Reading::Unplaced) => {
+                    unplaced.push(offset);
+                    continue;
+                }
+                Some(Reading::Plain(read)) => read,
             };
             let (time, source) = (read.row.time, read.row.source.clone());
             let at = match &current {
@@ -411,6 +437,6 @@ impl PyDetectionReader {
             );
             scans.set_item(scan.key, Bound::new(py, value)?)?;
         }
-        Ok(Some((batch.len(), scans)))
+        Ok(Some((batch.len() - unplaced.len(), scans, unplaced)))
     }
 }
