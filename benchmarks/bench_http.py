@@ -41,10 +41,11 @@ garbage collector, wherever it ran). In the
 servers this benchmark starts, ``WorldModel.ingest`` is split further
 (:func:`model_timers`): validate (``_read``: the detections parsed and checked
 against the knowledge, each one's range and region checked; with the Rust engine a
-plain batch in one pass of the core's reader), core (``_process_scans``: the MHF scan,
-the confidences, the reorder log), publish (``_publish``: ids and the published
-world), and what is left of ``ingest`` (grouping into scans, the time bounds), counted
-with validate. Outside the app: the client's time minus
+plain batch in one pass of the core's reader, ``_read_plain``), core
+(``_process_scans``, or ``_ingest_scan`` for a batch of one scan: the MHF scan, the
+confidences, the reorder log), publish (``_publish``: ids and the published world),
+and what is left of ``ingest`` (grouping into scans, the time bounds), counted with
+validate. Outside the app: the client's time minus
 ``semwm_ingest_latency_seconds`` (the client's JSON, the loopback, uvicorn's HTTP
 parsing); middlewares: that latency minus the stages (the guards, request ids, the
 metrics middleware). In process the same timers split ``ingest`` on the same requests
@@ -131,14 +132,18 @@ def _timed(function: Callable[..., Any], name: str) -> Callable[..., Any]:
 def model_timers() -> Iterator[None]:
     """Within: ``WorldModel.ingest``'s parts are stages of the request being timed
     (:mod:`api.stages`): ``validate`` (``WorldModel._read``: the batch parsed, checked
-    against the knowledge and each detection's range and region checked, or the Rust
-    engine's reader doing all that in one pass), ``core`` (``WorldModel._process_scans``)
-    and ``publish`` (``WorldModel._publish``). Three stages of a microsecond or less per
-    ``ingest`` (hold 0: one of each); outside a timed request they cost a no-op each."""
+    against the knowledge and each detection's range and region checked, or
+    ``WorldModel._read_plain``: the Rust engine's reader doing all that in one pass),
+    ``core`` (``WorldModel._process_scans``, or ``WorldModel._ingest_scan`` for a batch of
+    one scan read by the reader) and ``publish`` (``WorldModel._publish``, within either).
+    A few stages of a microsecond or less per ``ingest`` (hold 0); outside a timed
+    request they cost a no-op each."""
     import semwm.world as world
 
     patched: list[tuple[Any, str, Any]] = [
+        (world.WorldModel, "_read_plain", "validate"),
         (world.WorldModel, "_read", "validate"),
+        (world.WorldModel, "_ingest_scan", "core"),
         (world.WorldModel, "_process_scans", "core"),
         (world.WorldModel, "_publish", "publish"),
     ]

@@ -982,10 +982,10 @@ def markdown(doc: dict[str, Any]) -> str:
         "",
         "µs per detection (`bench_http.model_timers`): validate (`_read`: `parse`, `check` "
         "and each detection's range and region check; with the Rust engine a plain batch in "
-        "one pass of the core's reader), core (`_process_scans`: the MHF scan, the "
-        "confidences, the reorder log; the Rust engine's scan runs in the core), publish "
-        "(`_publish`: ids and the published world), the rest of `ingest` (grouping into "
-        "scans, the time bounds).",
+        "one pass of the core's reader, `_read_plain`), core (`_process_scans`, or "
+        "`_ingest_scan` for a batch of one scan: the MHF scan, the confidences, the reorder "
+        "log; the Rust engine's scan runs in the core), publish (`_publish`: ids and the "
+        "published world), the rest of `ingest` (grouping into scans, the time bounds).",
         "",
         "| workload | engine | validate | core | publish | rest | whole ingest |",
         "|---|---|---|---|---|---|---|",

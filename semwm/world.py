@@ -539,20 +539,13 @@ class WorldModel:
         sensor: SensorReport | Mapping[str, Any] | None,
     ) -> IngestResult:
         batch = as_batch(detections)
-        read = self._reader.read(batch, self._seq) if self._reader is not None else None
-        outside: list[IgnoredDetection] = []  # what the reader left to place, if ignored
-        if read is not None and read[2]:
-            placed = None if sensor is not None else self._ignored_apart(batch, read[2])
-            if placed is None:
-                read = None  # one is used after all, or a sensor report: the specification
-            else:
-                outside = placed
+        read = self._read_plain(batch, sensor)
         if read is not None and sensor is None and len(read[1]) == 1 and self._hold == 0:
-            done = self._ingest_scan(read[0], read[1], len(batch), outside)
+            done = self._ingest_scan(read[0], read[1], len(batch), read[2])
             if done is not None:
                 return done
         if read is not None and sensor is None:  # the common batch: its scans as read
-            applied, skipped = read[0], outside
+            applied, skipped = read[0], read[2]
             grouped: tuple[dict[ScanKey, Sequence[Measurement]], dict[ScanKey, SensorView]]
             grouped = (read[1], {})
             view = None
@@ -641,6 +634,25 @@ class WorldModel:
         self._seq += size
         return IngestResult(applied, after_state.time, len(skipped), tuple(skipped))
 
+    def _read_plain(
+        self, batch: list[DetectionInput], sensor: object
+    ) -> tuple[int, dict[ScanKey, Sequence[Measurement]], list[IgnoredDetection]] | None:
+        """The Rust engine's reading of a plain batch (``semwm._core.DetectionReader``):
+        how many detections are used, their scans, and why each other one is not
+        (:meth:`_ignored_apart`); ``None`` when the batch takes the specification's path
+        (:meth:`_read`): no reader, a detection that is not plain, or one the reader left
+        out with a sensor report (whose view reads every detection)."""
+        if self._reader is None:
+            return None
+        read = self._reader.read(batch, self._seq)
+        if read is None:
+            return None
+        count, scans, unplaced = read
+        if not unplaced:
+            return count, scans, []
+        skipped = None if sensor is not None else self._ignored_apart(batch, unplaced)
+        return None if skipped is None else (count, scans, skipped)
+
     def _ignored_apart(
         self, batch: list[DetectionInput], indices: list[int]
     ) -> list[IgnoredDetection] | None:
@@ -664,7 +676,8 @@ class WorldModel:
     def _read(
         self,
         batch: list[DetectionInput],
-        read: tuple[int, Mapping[ScanKey, Sequence[Measurement]], list[int]] | None = None,
+        read: tuple[int, Mapping[ScanKey, Sequence[Measurement]], list[IgnoredDetection]]
+        | None = None,
     ) -> tuple[list[Measurement], list[Measurement], list[IgnoredDetection]]:
         """A batch's measurements, those used, and why each other detection is not.
 
