@@ -64,7 +64,8 @@ pub struct SourceClock {
 pub struct StreamCounts {
     pub hits: f64,
     pub expected: f64,
-    pub detected: BTreeSet<u64>,
+    /// Shared between the rates of successive scans (a scan changes only its source's).
+    pub detected: Arc<BTreeSet<u64>>,
 }
 
 impl StreamCounts {
@@ -409,7 +410,7 @@ impl ObservedRates {
                 StreamCounts {
                     hits: kept * old.hits + hits as f64,
                     expected: kept * old.expected + chances as f64,
-                    detected: now, // a lineage counts once confirmed
+                    detected: Arc::new(now), // a lineage counts once confirmed
                 },
             );
         }

@@ -59,7 +59,7 @@ impl PyObservedRates {
             let counts = StreamCounts {
                 hits,
                 expected,
-                detected: detected.into_iter().collect(),
+                detected: Arc::new(detected.into_iter().collect()),
             };
             let key = (named(source), named(detector), named(cls));
             rates.streams.insert(key, counts);
