@@ -50,21 +50,6 @@ impl SensorView {
     }
 }
 
-/// Whether a detection at `position` lies within its detector's `reach` of its sensor
-/// (`semwm.world._within_reach`): the distance summed in the specification's order.
-/// `semwm.validation.out_of_range` keeps every such detection, whatever its margin.
-pub fn within_reach(position: &[f64], sensor: &[f64], reach: Option<f64>) -> bool {
-    let Some(reach) = reach else {
-        return true;
-    };
-    let mut squared = 0.0;
-    for (a, b) in position.iter().zip(sensor) {
-        let value = a - b;
-        squared += value * value;
-    }
-    squared.sqrt() <= reach
-}
-
 /// Whether a detection at `position` lies within its detector's `reach` of its sensor,
 /// beyond it by no more than the margin of its noise `r` (`d x d`) along the line of
 /// sight: `semwm.validation.out_of_range`'s test, `gate` its one-dimensional quantile
@@ -129,10 +114,35 @@ mod tests {
 
     #[test]
     fn reach_is_inclusive_and_unbounded_without_a_range() {
-        assert!(within_reach(&[3.0, 4.0], &[0.0, 0.0], Some(5.0)));
-        assert!(!within_reach(&[3.0, 4.0], &[0.0, 0.0], Some(4.999)));
-        assert!(within_reach(&[1e9, 0.0], &[0.0, 0.0], None));
-        assert!(!within_reach(&[f64::NAN, 0.0], &[0.0, 0.0], Some(1.0)));
+        let r = [0.0; 4];
+        assert!(within_reach_or_margin(
+            &[3.0, 4.0],
+            &[0.0, 0.0],
+            Some(5.0),
+            &r,
+            None
+        ));
+        assert!(!within_reach_or_margin(
+            &[3.0, 4.0],
+            &[0.0, 0.0],
+            Some(4.999),
+            &r,
+            None
+        ));
+        assert!(within_reach_or_margin(
+            &[1e9, 0.0],
+            &[0.0, 0.0],
+            None,
+            &r,
+            None
+        ));
+        assert!(!within_reach_or_margin(
+            &[f64::NAN, 0.0],
+            &[0.0, 0.0],
+            Some(1.0),
+            &r,
+            None
+        ));
     }
 
     #[test]
