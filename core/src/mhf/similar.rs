@@ -409,66 +409,83 @@ fn within_reach(a: &FilterState, b: &FilterState, max_distance: f64) -> bool {
     gap2 <= max_distance * trace * WIDEN
 }
 
-/// `_same_in`'s test of one ordered pair that passed [`within_reach`]: every condition of
-/// the module docstring, the distance with `P_a`, both covariances' determinants
-/// positive.
-fn batched_same(
-    (a, covariances_a, existence_a): (&Version, &Covariances, f64),
-    (b, covariances_b, existence_b): (&Version, &Covariances, f64),
-    max_distance: f64,
+/// `_same_in`'s conditions on one ordered pair that passed [`within_reach`] that need no
+/// covariance factor: existence, model and class probabilities agree. Errors as numpy
+/// raises before it tests anything (class distributions of different or zero length).
+fn probabilities_agree(
+    (a, existence_a): (&Version, f64),
+    (b, existence_b): (&Version, f64),
 ) -> KernelResult<bool> {
-    // numpy raises on these before it tests anything
     check_class_probs(a, b)?;
     if a.class_probs.is_empty() {
         numpy_max(std::iter::empty())?;
     }
-    let (sa, sb) = (&a.state, &b.state);
-    let (m, n) = (sa.modes, sa.size);
     let within = |p: f64, q: f64| (p - q).abs() <= PROBABILITY_TOLERANCE;
+    Ok(within(existence_a, existence_b)
+        && a.state
+            .mu
+            .iter()
+            .zip(&b.state.mu)
+            .all(|(&p, &q)| within(p, q))
+        && a.class_probs
+            .iter()
+            .zip(b.class_probs.iter())
+            .all(|(&p, &q)| within(p, q)))
+}
+
+/// `_same_in`'s remaining conditions on a pair that passed [`probabilities_agree`]: both
+/// covariances' determinants positive and close, and the distance with `P_a` (the
+/// specification's `&` of the same pure conditions; the one that needs an inverse last).
+fn covariances_agree(
+    (a, covariances_a): (&FilterState, &Covariances),
+    (b, covariances_b): (&FilterState, &Covariances),
+    max_distance: f64,
+) -> bool {
+    let (m, n) = (a.modes, a.size);
     let near = || {
         let inverses = covariances_a.inverse();
         (0..m).all(|mode| {
-            let delta = mode_delta(sa, sb, mode);
+            let delta = mode_delta(a, b, mode);
             let inverse = &inverses[mode * n * n..(mode + 1) * n * n];
             quadratic_form(&delta[..n], inverse, n) <= max_distance
         })
     };
-    // every test is a plain condition: the cheap ones first, the one that needs an
-    // inverse last (the specification's `&` of the same conditions)
-    Ok(covariances_a.valid
+    covariances_a.valid
         && covariances_b.valid
-        && within(existence_a, existence_b)
-        && sa.mu.iter().zip(&sb.mu).all(|(&p, &q)| within(p, q))
-        && a.class_probs
-            .iter()
-            .zip(b.class_probs.iter())
-            .all(|(&p, &q)| within(p, q))
         && covariances_a
             .log_det
             .iter()
             .zip(&covariances_b.log_det)
             .all(|(la, lb)| (la - lb).abs() <= LOG_DET_TOLERANCE)
-        && near())
+        && near()
 }
 
 /// `_same_pairs`: the ordered key pairs `(a, b)`, `a != b`, of versions of one lineage
 /// (`lineages`: the versions of each) that are the same estimate: only versions of one
-/// class, label and state shape are compared, the cheap bound first. Every version in
-/// `lineages` must have passed [`check_state`].
+/// class, label and state shape are compared, the cheap conditions first, and a
+/// covariance is factored only for a pair that passes them. Every version in `lineages`
+/// must have passed [`check_state`].
 fn same_pairs(
     lineages: &[Vec<&Version>],
     existence: &KeyMap<Key, f64>,
     max_distance: f64,
 ) -> KernelResult<KeySet<(Key, Key)>> {
+    let existence_of = |key: Key| existence.get(&key).copied().unwrap_or(1.0);
     let mut same = KeySet::default();
     for versions in lineages {
-        let candidates: Vec<(usize, usize)> = (0..versions.len())
-            .flat_map(|i| (0..versions.len()).map(move |j| (i, j)))
-            .filter(|&(i, j)| {
+        let mut candidates: Vec<(usize, usize)> = Vec::new();
+        for i in 0..versions.len() {
+            for j in 0..versions.len() {
                 let (a, b) = (versions[i], versions[j]);
-                i != j && comparable(a, b) && within_reach(&a.state, &b.state, max_distance)
-            })
-            .collect();
+                if i != j
+                    && comparable(a, b)
+                    && within_reach(&a.state, &b.state, max_distance)
+                    && probabilities_agree((a, existence_of(a.key)), (b, existence_of(b.key)))?
+                {
+                    candidates.push((i, j));
+                }
+            }
+        }
         if candidates.is_empty() {
             continue;
         }
@@ -486,12 +503,11 @@ fn same_pairs(
             else {
                 continue; // both were made just above
             };
-            let existence_of = |key: Key| existence.get(&key).copied().unwrap_or(1.0);
-            if batched_same(
-                (a, covariances_a, existence_of(a.key)),
-                (b, covariances_b, existence_of(b.key)),
+            if covariances_agree(
+                (&a.state, covariances_a),
+                (&b.state, covariances_b),
                 max_distance,
-            )? {
+            ) {
                 same.insert((a.key, b.key));
             }
         }
