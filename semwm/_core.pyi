@@ -217,6 +217,25 @@ class Engine:
     def current(
         self, state: Any, published: Mapping[int, Any], ids: Mapping[int, int]
     ) -> dict[int, VersionRef]: ...
+    def world_at(
+        self,
+        state: Any,
+        latest: Any,
+        at: float,
+        published: Mapping[int, Any],
+        ids: Mapping[int, int],
+    ) -> list[
+        tuple[
+            int,
+            float,
+            int,
+            int,
+            tuple[float, ...],
+            tuple[tuple[float, ...], ...],
+            tuple[float, ...] | None,
+            list[float],
+        ]
+    ]: ...
     def publish(
         self,
         state: Any,

@@ -1596,6 +1596,16 @@ class WorldModel:
         state, book = self._as_of(at)
         if state.time is None:  # before the first scan
             return WorldState(time=at, objects=())
+        core = self._mhf._core
+        if (
+            core is not None
+            and self._mhf.mht
+            and type(state) is CoreState
+            and state.engine is core
+            and type(self._state) is CoreState
+        ):
+            found = self._core_world(state, book, at, floor, cls, near, label, states)
+            return WorldState(time=at, objects=tuple(_unique_labels(found)))
         marginals, predicted = self._marginals(at, state)
         if self._mhf.mht:
             marginals = self._same_objects(
@@ -1624,7 +1634,16 @@ class WorldModel:
                 and float(np.linalg.norm(position - np.asarray(near[:dim]))) > near[dim]
             ):
                 continue
-            obj = self._world_object(track, predicted, i, marginal.existence, at, rows, book)
+            mean = predicted.state_mean[i]
+            obj = self._world_object(
+                track,
+                marginal.existence,
+                at,
+                (tuple(rows[0][i]), tuple(map(tuple, rows[1][i]))),
+                tuple(mean[dim : 2 * dim].tolist()) if mean.shape[0] > dim else None,
+                predicted.mu[i].tolist(),
+                book,
+            )
             if states is not None and (
                 obj.confidence is None or obj.confidence.state not in states
             ):
@@ -1632,6 +1651,54 @@ class WorldModel:
             objects.append(obj)
         objects.sort(key=lambda o: o.id)
         return WorldState(time=at, objects=tuple(_unique_labels(objects)))
+
+    def _core_world(
+        self,
+        state: CoreState,
+        book: BookView,
+        at: float,
+        floor: float,
+        cls: str | None,
+        near: Sequence[float] | None,
+        label: str | None,
+        states: set[str] | None,
+    ) -> list[WorldObject]:
+        """:meth:`world`'s objects (``mht``), their marginals, the most probable version
+        of each and its prediction to ``at`` made in the core (``Engine.world_at``:
+        :meth:`_marginals` and :meth:`_same_objects` there), in id order."""
+        core = self._mhf._core
+        assert core is not None and isinstance(self._state, CoreState)
+        rows = core.engine.world_at(state, self._state, at, self._published, self._ids)
+        rows = [row for row in rows if row[1] >= floor]
+        tracks = core.tracks_of_serials(state, [row[2] for row in rows], [row[3] for row in rows])
+        covered = self.taxonomy.covers(cls) if cls is not None else None
+        dim = self._knowledge.world.dimension
+        objects = []
+        for (_, existence, _, _, position, covariance, velocity, mu), track in zip(
+            rows, tracks, strict=True
+        ):
+            if track.created > at + 1e-9:
+                continue
+            if covered is not None and track.cls not in covered:
+                continue
+            if label is not None and track.label != label:
+                continue
+            if (
+                near is not None
+                and float(np.linalg.norm(np.asarray(position) - np.asarray(near[:dim])))
+                > near[dim]
+            ):
+                continue
+            obj = self._world_object(
+                track, existence, at, (position, covariance), velocity, mu, book
+            )
+            if states is not None and (
+                obj.confidence is None or obj.confidence.state not in states
+            ):
+                continue
+            objects.append(obj)
+        objects.sort(key=lambda o: o.id)
+        return objects
 
     def rate_report(self) -> list[StreamReport]:
         """Per source and detector, the clutter and detection rates its data shows beside
@@ -1658,26 +1725,25 @@ class WorldModel:
     def _world_object(
         self,
         track: Track,
-        predicted: Predicted,
-        i: int,
         existence: float,
         at: float,
-        rows: tuple[list[list[float]], list[list[list[float]]]],
+        position: tuple[tuple[float, ...], tuple[tuple[float, ...], ...]],
+        velocity: tuple[float, ...] | None,
+        mu: Sequence[float],
         book: BookView | None = None,
     ) -> WorldObject:
-        """``rows``: every prediction's position and covariance as Python floats;
-        ``book``: the confidences to read (default: the current ones)."""
-        dim = self._knowledge.world.dimension
-        mean = predicted.state_mean[i]
+        """The object ``track`` shows at ``at``: ``position`` its predicted position and
+        covariance, ``velocity`` its predicted velocity (``None`` for a filter without
+        one), ``mu`` its mode probabilities; ``book``: the confidences to read
+        (default: the current ones)."""
         flt = self._mhf.factory.filter_for(track.cls)
-        velocity = tuple(mean[dim : 2 * dim].tolist()) if mean.shape[0] > dim else None
         modes = None
         if flt.modes > 1:
             names = [
                 o if list(flt.orders).count(o) == 1 else f"{o}_{j}"
                 for j, o in enumerate(flt.orders)
             ]
-            modes = dict(zip(names, predicted.mu[i].tolist(), strict=True))
+            modes = dict(zip(names, mu, strict=True))
         object_id = self._ids.get(track.lineage)
         tentative = object_id is None
         if object_id is None:
@@ -1690,9 +1756,9 @@ class WorldModel:
             id=object_id,
             cls=track.cls,
             label=track.label,
-            position=tuple(rows[0][i]),
+            position=position[0],
             velocity=velocity,
-            covariance=tuple(map(tuple, rows[1][i])),
+            covariance=position[1],
             existence=min(1.0, existence),
             last_seen=track.last_seen,
             created=track.created,

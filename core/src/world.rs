@@ -14,9 +14,12 @@
 
 use std::sync::Arc;
 
+use crate::error::KernelResult;
 use crate::filters::small::{mahalanobis_squared, slogdet};
 use crate::mhf::existence::inside_probability;
+use crate::mhf::filter::Filter;
 use crate::mhf::hypotheses::{fsum, KeyMap, KeySet, TIE};
+use crate::mhf::predict::{predict, Predicted};
 use crate::mhf::state::{Key, State, Version};
 use crate::mhf::tables::Tables;
 
@@ -214,7 +217,15 @@ pub fn current(
         })
         .collect();
     *cache = kept;
-    let merged = same_objects(marginals, state, tables, &summaries, shown, ids);
+    let best = best_keys(state);
+    let points: Vec<(&[f64], &[f64])> = marginals
+        .iter()
+        .map(|m| {
+            let summary = &summaries[&m.key];
+            (&summary.position[..], &summary.covariance[..])
+        })
+        .collect();
+    let merged = same_objects(marginals, &points, state, tables, &best, shown, ids);
     merged
         .into_iter()
         .filter(|m| m.existence >= floor)
@@ -222,12 +233,26 @@ pub fn current(
         .collect()
 }
 
+/// The keys of the most probable hypothesis (`MHFState.best`: the best of every
+/// cluster).
+pub fn best_keys(state: &State) -> KeySet<Key> {
+    state
+        .clusters
+        .iter()
+        .flat_map(|c| c.hypotheses[0].keys.iter().copied())
+        .collect()
+}
+
 /// One entry per physical object (`WorldModel._same_objects`): see the module docs.
+/// `points[i]`: marginal `i`'s position `d` and its covariance `d x d`; `state`: the
+/// state whose versions the marginals show; `best_keys`: the keys of the most probable
+/// hypothesis of the model's latest state ([`best_keys`]).
 fn same_objects(
     marginals: Vec<Marginal>,
+    points: &[(&[f64], &[f64])],
     state: &State,
     tables: &Tables,
-    summaries: &KeyMap<Key, Arc<Summary>>,
+    best_keys: &KeySet<Key>,
     shown: &KeySet<u64>,
     ids: &KeyMap<u64, i64>,
 ) -> Vec<Marginal> {
@@ -238,11 +263,6 @@ fn same_objects(
     if candidates.len() < 2 {
         return marginals;
     }
-    let best_keys: KeySet<Key> = state
-        .clusters
-        .iter()
-        .flat_map(|c| c.hypotheses[0].keys.iter().copied())
-        .collect();
     let together: KeySet<u64> = candidates
         .iter()
         .filter(|&&i| best_keys.contains(&marginals[i].key))
@@ -260,10 +280,10 @@ fn same_objects(
         }
         i
     }
-    let summary = |i: usize| &summaries[&marginals[candidates[i]].key];
+    let point = |i: usize| points[candidates[i]];
     let spread: Vec<f64> = (0..count)
         .map(|i| {
-            let p = &summary(i).covariance;
+            let p = point(i).1;
             let mut total = 0.0;
             for a in 0..d {
                 total += p[a * d + a];
@@ -274,8 +294,8 @@ fn same_objects(
     let k = tables.class_count();
     for a in 0..count {
         for b in a + 1..count {
-            let (sa, sb) = (summary(a), summary(b));
-            let delta: Vec<f64> = (0..d).map(|i| sa.position[i] - sb.position[i]).collect();
+            let ((position_a, covariance_a), (position_b, covariance_b)) = (point(a), point(b));
+            let delta: Vec<f64> = (0..d).map(|i| position_a[i] - position_b[i]).collect();
             let mut squared = 0.0;
             for value in &delta {
                 squared += value * value;
@@ -283,7 +303,7 @@ fn same_objects(
             if squared > SAME_OBJECT_GATE * (spread[a] + spread[b]) {
                 continue;
             }
-            if !coinciding(&delta, &sa.covariance, &sb.covariance, d) {
+            if !coinciding(&delta, covariance_a, covariance_b, d) {
                 continue;
             }
             let (first, second) = (&marginals[candidates[a]], &marginals[candidates[b]]);
@@ -369,4 +389,103 @@ fn same_objects(
     let mut out: Vec<Marginal> = result.into_iter().flatten().collect();
     out.extend(appended);
     out
+}
+
+/// The world of `state` predicted to `at` (`WorldModel._marginals` and
+/// `_same_objects`, `mht`): every version predicted to `at`, and one entry per physical
+/// object, `(marginal, row)` with `row` the version's row of the prediction, in the
+/// specification's order. Existence at `at`: objects leave at their leave rates past the
+/// state's time and nothing is missed (a query is no scan); versions leaving at `at`
+/// (`Filter::leaving`) count for nothing. `best_keys`, `shown` and `ids`: as
+/// [`same_objects`] takes them, of the model's latest state.
+pub fn at(
+    filter: &Filter,
+    state: &State,
+    at: f64,
+    best_keys: &KeySet<Key>,
+    shown: &KeySet<u64>,
+    ids: &KeyMap<u64, i64>,
+) -> KernelResult<(Predicted, Vec<(Marginal, usize)>)> {
+    let tables = &filter.tables;
+    let versions: Vec<Arc<Version>> = state.tracks.values().map(|e| e.version.clone()).collect();
+    let predicted = predict(&versions, at, tables)?;
+    let Some(time) = state.time else {
+        return Ok((predicted, Vec::new()));
+    };
+    let inside = filter.inside(&predicted);
+    // past the last scan no scan has missed anything: no missed-detection term
+    let future = if at > time { at } else { time };
+    let (existence, _) = filter.existence_at(state, &predicted, future, None, &inside);
+    let gone = filter.leaving(&predicted, at, &existence, &inside);
+    let row_of: KeyMap<Key, usize> = versions
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (v.key, i))
+        .collect();
+    let floor = tables.min_existence;
+    // lineage -> (marginal, row), in order of first insertion (a Python dict)
+    let mut result: Vec<(Marginal, usize)> = Vec::new();
+    let mut result_at: KeyMap<u64, usize> = KeyMap::default();
+    for cluster in &state.clusters {
+        let mut totals: Vec<(u64, f64)> = Vec::new();
+        let mut total_at: KeyMap<u64, usize> = KeyMap::default();
+        let mut chosen: KeyMap<u64, Key> = KeyMap::default();
+        let mut present_in: KeySet<u64> = KeySet::default();
+        for h in &cluster.hypotheses {
+            let p = h.log_weight.exp();
+            for &key in &h.keys {
+                let row = row_of[&key];
+                if gone[row] {
+                    continue;
+                }
+                let lineage = versions[row].lineage;
+                let present = existence[row] * inside[row];
+                match total_at.get(&lineage) {
+                    Some(&i) => totals[i].1 += p * present,
+                    None => {
+                        total_at.insert(lineage, totals.len());
+                        totals.push((lineage, 0.0 + p * present));
+                    }
+                }
+                // shown in the most probable hypothesis's version in which it is
+                // present, not in a stale version that left the region long ago
+                if present >= floor && !present_in.contains(&lineage) {
+                    present_in.insert(lineage);
+                    chosen.insert(lineage, key);
+                }
+                chosen.entry(lineage).or_insert(key);
+            }
+        }
+        for (lineage, total) in totals {
+            let key = chosen[&lineage];
+            let marginal = Marginal {
+                lineage,
+                existence: total.min(1.0),
+                key,
+            };
+            match result_at.get(&lineage) {
+                Some(&i) if result[i].0.existence < total => result[i] = (marginal, row_of[&key]),
+                Some(_) => {}
+                None => {
+                    result_at.insert(lineage, result.len());
+                    result.push((marginal, row_of[&key]));
+                }
+            }
+        }
+    }
+    let rows: KeyMap<u64, usize> = result.iter().map(|(m, row)| (m.lineage, *row)).collect();
+    let points: Vec<(&[f64], &[f64])> = result
+        .iter()
+        .map(|(_, row)| (predicted.position(*row), predicted.covariance(*row)))
+        .collect();
+    let marginals = result.iter().map(|(m, _)| m.clone()).collect();
+    let merged = same_objects(marginals, &points, state, tables, best_keys, shown, ids);
+    let merged = merged
+        .into_iter()
+        .map(|m| {
+            let row = rows[&m.lineage];
+            (m, row)
+        })
+        .collect();
+    Ok((predicted, merged))
 }

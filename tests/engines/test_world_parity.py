@@ -588,3 +588,41 @@ def test_same_world_when_twins_tie_in_existence() -> None:
     view = {"pose": [4.18, 2.92, 1.25, -2.141592653589793], "source": "C", "time": 0.1}
     twin.ingest([], sensor={**view, "looking_at": []})
     assert twin.calls == 4
+
+
+@pytest.mark.parametrize(("name", "sizes"), [("sim1", {}), ("robocup", {"duration": 2.0})])
+def test_same_answers_to_filtered_queries(name: str, sizes: dict[str, float]) -> None:
+    """``world()`` with each of its filters (class, near, label, min_existence,
+    confidence), now, in the past and ahead: the same objects from both engines (the
+    Rust engine answers them in the core, ``Engine.world_at``). Every kind of filter
+    finds something at least once, so none is compared on empty answers only."""
+    scenario = make_scenario(name, 0, **sizes)
+    knowledge = _knowledge(scenario.knowledge_file)
+    twin = Twin(knowledge, reorder_window=1.0)
+    found: dict[str, int] = {}
+    for frame, scan in enumerate(scans(scenario.detections)):
+        twin.ingest(scan)
+        if frame % 7:
+            continue
+        now = twin.python.latest_time
+        assert now is not None
+        shown = twin.python.world(min_existence=1e-6).objects
+        queries: list[tuple[str, dict[str, Any]]] = [
+            ("min_existence", {"min_existence": 0.5}),
+            *[("confidence", {"confidence": state}) for state in ("valid", "suspicious")],
+            *[("cls", {"cls": cls}) for cls in sorted(knowledge.classes)],
+            *[("near", {"near": (*o.position, 0.5), "min_existence": 1e-6}) for o in shown[:3]],
+            *[("label", {"label": o.label}) for o in shown if o.label is not None][:2],
+        ]
+        for time in (now - 0.5, now, now + 0.7):
+            for kind, options in queries:
+                try:
+                    expected, got = twin._both("world", time, **options)
+                except BeforeHistoryError:
+                    continue
+                _same_state(got, expected, (kind, options, time, frame))
+                found[kind] = found.get(kind, 0) + (len(expected.objects) > 0)
+    kinds = {"min_existence", "confidence", "cls", "near"} | (
+        {"label"} if name == "robocup" else set()
+    )
+    assert {kind for kind, count in found.items() if count} >= kinds, found

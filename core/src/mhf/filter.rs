@@ -218,7 +218,7 @@ impl Filter {
     /// (`existence_at`): objects leave at their leave rate; a scan that could have seen
     /// an object misses it at its source's rate over the time since the source's
     /// previous scan; silence and time alone are never a miss.
-    fn existence_at(
+    pub(crate) fn existence_at(
         &self,
         state: &State,
         predicted: &Predicted,
@@ -267,7 +267,7 @@ impl Filter {
     /// Rows of objects to remove at `time` (`leaving`): position covariance above the
     /// class's P_max (paper 002 III-E), unseen longer than its maximum (C3), not finite,
     /// and (`mht`) existence inside the region below `removal_existence`.
-    fn leaving(
+    pub(crate) fn leaving(
         &self,
         predicted: &Predicted,
         time: f64,

@@ -275,6 +275,18 @@ pub struct PyEngine {
     summaries: Arc<Mutex<Summaries>>,
 }
 
+/// One object of `Engine.world_at`.
+type WorldRow<'py> = (
+    u64,
+    f64,
+    u64,
+    u64,
+    Bound<'py, PyTuple>,
+    Bound<'py, PyTuple>,
+    Option<Bound<'py, PyTuple>>,
+    Vec<f64>,
+);
+
 /// A version of a core state, named without making its Python value
 /// (`semwm.mhf.core_engine.VersionRef`): the published world of every scan names every
 /// object shown, so one is made per object and scan, here rather than in Python.
@@ -631,6 +643,84 @@ impl PyEngine {
         let shown = published_lineages(published)?.into_iter().collect();
         let rows = self.current_rows(state, shown, &id_table(ids)?)?;
         self.current_refs(state, &rows)
+    }
+
+    /// The world of `state` (a `CoreState`) predicted to `at` (`WorldModel.world`'s
+    /// `_marginals` and `_same_objects`, `mht`; `crate::world::at`): one row per
+    /// physical object, `(lineage, existence, key, serial, position, covariance,
+    /// velocity, mode_probabilities)` in the specification's order, the position and
+    /// its covariance as tuples (`velocity` `None` for a filter without one). `latest`
+    /// is the model's latest state (a `CoreState`: its most probable hypothesis decides
+    /// which lineages are distinct), `published` the objects shown now and `ids` their
+    /// ids, as `Engine.current` takes them.
+    fn world_at<'py>(
+        &self,
+        state: &Bound<'py, PyAny>,
+        latest: &Bound<'py, PyAny>,
+        at: f64,
+        published: &Bound<'py, PyAny>,
+        ids: &Bound<'py, PyDict>,
+    ) -> PyResult<Vec<WorldRow<'py>>> {
+        let py = state.py();
+        let shown: KeySet<u64> = published_lineages(published)?.into_iter().collect();
+        let ids = id_table(ids)?;
+        let held = state
+            .getattr("core")?
+            .extract::<PyRef<'_, PyState>>()?
+            .state
+            .clone();
+        let newest = latest
+            .getattr("core")?
+            .extract::<PyRef<'_, PyState>>()?
+            .state
+            .clone();
+        let filter = self.filter.clone();
+        let d = filter.tables.dim;
+        let rows = run(py, "Engine.world_at", move || {
+            let best = crate::world::best_keys(&newest);
+            let (predicted, marginals) = crate::world::at(&filter, &held, at, &best, &shown, &ids)?;
+            Ok(marginals
+                .into_iter()
+                .map(|(m, row)| {
+                    let serial = held.tracks[&m.key].serial;
+                    let predicted_row = &predicted.rows[row];
+                    let mean = &predicted_row.mean;
+                    let velocity =
+                        (mean.len() > d).then(|| mean[d..(2 * d).min(mean.len())].to_vec());
+                    (
+                        (m.lineage, m.existence, m.key, serial),
+                        predicted.position(row).to_vec(),
+                        predicted.covariance(row).to_vec(),
+                        velocity,
+                        predicted_row.mu().to_vec(),
+                    )
+                })
+                .collect::<Vec<_>>())
+        })?;
+        rows.into_iter()
+            .map(
+                |((lineage, existence, key, serial), position, covariance, velocity, mu)| {
+                    let covariance = PyTuple::new(
+                        py,
+                        covariance
+                            .chunks_exact(d)
+                            .map(|row| PyTuple::new(py, row))
+                            .collect::<PyResult<Vec<_>>>()?,
+                    )?;
+                    let velocity = velocity.map(|v| PyTuple::new(py, v)).transpose()?;
+                    Ok((
+                        lineage,
+                        existence,
+                        key,
+                        serial,
+                        PyTuple::new(py, position)?,
+                        covariance,
+                        velocity,
+                        mu,
+                    ))
+                },
+            )
+            .collect()
     }
 
     /// `WorldModel._publish` of `state` (a `CoreState`) with its common case here:
