@@ -356,6 +356,8 @@ class WorldModel:
         core = self._mhf._core
         self._reader = None if core is None else core_reader(knowledge, self._mhf.factory, core)
         self._summaries = {}  # the region may have changed
+        # lost ids found able to return (_may_return) under this knowledge, by id()
+        self._returning: dict[int, _Lost] = {}
 
     def reset(self) -> None:
         """Forget every detection and object."""
@@ -1186,7 +1188,11 @@ class WorldModel:
             self._lost = {
                 i: p
                 for i, p in self._lost.items()
-                if now - p.lost_at <= memory and self._may_return(p)
+                if now - p.lost_at <= memory and self._returnable(p)
+            }
+            returning = self._returning
+            self._returning = {
+                id(p): p for p in self._lost.values() if returning.get(id(p)) is p
             }
         else:  # paper: an id waits while its lineage lives (the MAP may switch back)
             self._lost = {
@@ -1228,6 +1234,17 @@ class WorldModel:
                 self._next_id += 1
             self._ids = ids
         self._published = {ids[lineage]: track for lineage, track in current.items()}
+
+    def _returnable(self, pub: _Lost) -> bool:
+        """:meth:`_may_return`, remembered for each lost id while the knowledge stays (it
+        depends on nothing else): a lost id is tested once, not at every scan it
+        waits."""
+        if self._returning.get(id(pub)) is pub:
+            return True
+        if not self._may_return(pub):
+            return False
+        self._returning[id(pub)] = pub
+        return True
 
     def _may_return(self, pub: _Lost) -> bool:
         """Whether a lost object may come back under its id (``mht``): not when it was
