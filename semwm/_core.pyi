@@ -300,7 +300,16 @@ class Scan(Sequence[Measurement]):
         self,
     ) -> list[
         tuple[
-            int, float, int, list[float], list[float], int, str, str | None, float,
-            list[float] | None, float,
+            int,
+            float,
+            int,
+            list[float],
+            list[float],
+            int,
+            str,
+            str | None,
+            float,
+            list[float] | None,
+            float,
         ]
     ]: ...

@@ -228,9 +228,7 @@ def _within(value: float, low: float, high: float) -> bool:
     return low <= value <= high
 
 
-def _within_reach(
-    position: Sequence[float], sensor: Sequence[float], reach: float | None
-) -> bool:
+def _within_reach(position: Sequence[float], sensor: Sequence[float], reach: float | None) -> bool:
     """Whether a detection lies within its detector's ``reach`` of its sensor: then
     :func:`semwm.validation.out_of_range` keeps it whatever the margin (the same
     distance, summed in the same order)."""
@@ -489,9 +487,7 @@ class WorldModel:
             tracks = {k: state.tracks[k] for k in referenced}
             existence = {k: state.existence.get(k, 1.0) for k in referenced}
             self._state = replace(state, clusters=clusters, tracks=tracks, existence=existence)
-        self._published = {
-            i: p for i, p in self._published.items() if p.cls in knowledge.classes
-        }
+        self._published = {i: p for i, p in self._published.items() if p.cls in knowledge.classes}
         self._lost = {i: p for i, p in self._lost.items() if p.track.cls in knowledge.classes}
         if gone:
             self._publish()
@@ -1191,9 +1187,7 @@ class WorldModel:
                 if now - p.lost_at <= memory and self._returnable(p)
             }
             returning = self._returning
-            self._returning = {
-                id(p): p for p in self._lost.values() if returning.get(id(p)) is p
-            }
+            self._returning = {id(p): p for p in self._lost.values() if returning.get(id(p)) is p}
         else:  # paper: an id waits while its lineage lives (the MAP may switch back)
             self._lost = {
                 i: p
@@ -1702,8 +1696,7 @@ class WorldModel:
                 continue
             if (
                 near is not None
-                and float(np.linalg.norm(np.asarray(position) - np.asarray(near[:dim])))
-                > near[dim]
+                and float(np.linalg.norm(np.asarray(position) - np.asarray(near[:dim]))) > near[dim]
             ):
                 continue
             obj = self._world_object(

@@ -64,9 +64,7 @@ def parse_near(near: str) -> tuple[float, ...]:
     return values
 
 
-@router.get(
-    "/world", response_model=WorldOut, summary="The objects of the world", responses=_PAST
-)
+@router.get("/world", response_model=WorldOut, summary="The objects of the world", responses=_PAST)
 def get_world(
     world: WorldDep,
     time: TimeQuery = None,

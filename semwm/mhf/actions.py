@@ -49,9 +49,7 @@ class Kick:
     speed: float
 
 
-def kicked_version(
-    mhf: MultipleHypothesisFilter, state: StateView, key: int, kick: Kick
-) -> Track:
+def kicked_version(mhf: MultipleHypothesisFilter, state: StateView, key: int, kick: Kick) -> Track:
     """The version of ``key`` that the kick moved: predicted to the kick time, velocity set."""
     track = state.tracks[key]
     flt = mhf.factory.filter_for(track.cls)

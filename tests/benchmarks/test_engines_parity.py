@@ -41,6 +41,7 @@ def test_a_run_in_step_is_equal_and_written() -> None:
 
 def test_a_nudged_rust_engine_shows(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every measurement 1e-6 m off on the Rust side: the largest difference says so."""
+
     def nudged(self: Any, measurements: Any) -> Any:
         return [m._replace(z=m.z + 1e-6 * (np.arange(m.z.size) == 0)) for m in measurements]
 

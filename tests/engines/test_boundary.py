@@ -58,7 +58,9 @@ def test_arrays_of_any_layout_are_read_as_their_values() -> None:
         R = np.asfortranarray(m.R + np.array([[0.0, 1e-3], [0.0, 0.0]]))
         assert not z.flags.c_contiguous and not R.flags.c_contiguous
         strided.append(m._replace(z=z, R=R))
-    expected = [m._replace(R=np.ascontiguousarray(s.R)) for m, s in zip(measurements, strided, strict=True)]
+    expected = [
+        m._replace(R=np.ascontiguousarray(s.R)) for m, s in zip(measurements, strided, strict=True)
+    ]
     assert _scan(model, strided) == _scan(model, expected)
     assert _scan(model, strided) != plain  # the off-diagonal noise was read, in its place
 

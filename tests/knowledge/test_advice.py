@@ -89,8 +89,7 @@ def test_removed_unseen_before_its_confidence_turns_invalid_is_warned() -> None:
 def test_p_max_reached_before_invalid_is_warned() -> None:
     """A walking person's covariance passes P_max within seconds of its last detection."""
     person = (
-        "\n    max_position_variance: 0.01"
-        "\n    initial_velocity_covariance: [[1.0, 0], [0, 1.0]]"
+        "\n    max_position_variance: 0.01\n    initial_velocity_covariance: [[1.0, 0], [0, 1.0]]"
     )
     text = BASE.format(world="", f=5.0, new=0.05, cls=person, r=0.0025, c=1.0).replace(
         "motion_model: zeroth_order, system_noise: [[1.0e-6, 0], [0, 1.0e-6]]",
