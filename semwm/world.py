@@ -1749,11 +1749,7 @@ class WorldModel:
         flt = self._mhf.factory.filter_for(track.cls)
         modes = None
         if flt.modes > 1:
-            names = [
-                o if list(flt.orders).count(o) == 1 else f"{o}_{j}"
-                for j, o in enumerate(flt.orders)
-            ]
-            modes = dict(zip(names, mu, strict=True))
+            modes = dict(zip(flt.mode_names, mu, strict=True))
         object_id = self._ids.get(track.lineage)
         tentative = object_id is None
         if object_id is None:

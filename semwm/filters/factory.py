@@ -78,6 +78,13 @@ class ClassFilter:
     def state_size(self) -> int:
         return int(self.initial_covariance.shape[0])
 
+    @cached_property
+    def mode_names(self) -> tuple[str, ...]:
+        """Each mode's name as a world object's ``mode_probabilities`` gives it: its
+        motion model, numbered (``cv_0``, ``cv_1``) where two modes share one."""
+        orders = list(self.orders)
+        return tuple(o if orders.count(o) == 1 else f"{o}_{j}" for j, o in enumerate(self.orders))
+
     def initial_states(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """New objects at measured positions ``z`` ``(K, d)``, zero velocity (paper 002 III-A)."""
         K = z.shape[0]
