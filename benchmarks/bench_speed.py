@@ -84,6 +84,9 @@ GRID_WARMUP, GRID_TIMED, GRID_TRACED = 10, 20, 3
 QUICK_GRID_TIMED = 5
 TEAM_SECONDS, QUICK_TEAM_SECONDS = 6.0, 3.0
 BATCHES, QUICK_BATCHES = 20, 8
+LONGER = (16.0, 32.0)
+"""The long match once more at these lengths (s), once per engine: does its cost per
+detection grow with its length?"""
 QUARTERS = 4
 FLAT = 1.2
 """The last quarter of the long match within this factor of the first: flat."""
@@ -669,6 +672,7 @@ def run(quick: bool, repeats: int) -> dict[str, Any]:
         "sizes": {
             "scenarios": SCENARIOS,
             "long": {"scenario": long_name, "duration": long_duration, "quarters": QUARTERS},
+            "longer": [] if quick else list(LONGER),
             "grid": {
                 "n": list(GRID_SIZES),
                 "warmup_frames": GRID_WARMUP,
@@ -746,6 +750,12 @@ def run(quick: bool, repeats: int) -> dict[str, Any]:
             results[label] = best
         doc["results"] = results
         doc["raw"] = measured
+        doc["longer"] = [
+            {"engine": engine, "duration": duration,
+             **_timed_run(long_name, {"duration": duration}, engine)}
+            for duration in ([] if quick else LONGER)
+            for engine in tqdm(ENGINES, desc=f"{long_name} {duration:g} s", unit="run")
+        ]  # fmt: skip
         with tqdm(total=4, desc="memory, stages, profiles", unit="step") as bar:
             doc["memory"] = [
                 row for engine in ENGINES
@@ -902,6 +912,26 @@ def markdown(doc: dict[str, Any]) -> str:
             + " | ".join(fmt(v) for v in q)
             + f" | {fmt(growth)} | {fmt(spread)} | {fmt(s['gospa'])} | {s['id_switches']} |"
         )
+    if doc.get("longer"):
+        lines += [
+            "",
+            "The same match longer, one run per engine and length (not the best of "
+            "repeats): whether the cost per detection grows with the match's length.",
+            "",
+            "| engine | match | detections | whole match | "
+            + " | ".join(f"Q{q + 1}" for q in range(QUARTERS))
+            + " | last / first |",
+            "|---|---|---|---|" + "---|" * QUARTERS + "---|",
+        ]
+        for s in doc["longer"]:
+            q = s["quarters_cpu_us_per_detection"]
+            growth = q[-1] / q[0] if q[0] and q[-1] else None
+            lines.append(
+                f"| {s['engine']} | {s['duration']:g} s | {s['detections']} | "
+                f"{fmt(s['cpu_us_per_detection'])} | "
+                + " | ".join(fmt(v) for v in q)
+                + f" | {fmt(growth)} |"
+            )
     if doc.get("long_split"):
         lines += [
             "",
