@@ -672,7 +672,7 @@ def run(quick: bool, repeats: int) -> dict[str, Any]:
         "sizes": {
             "scenarios": SCENARIOS,
             "long": {"scenario": long_name, "duration": long_duration, "quarters": QUARTERS},
-            "longer": [] if quick else list(LONGER),
+            "longer": {"durations": [] if quick else list(LONGER), "runs": 1},
             "grid": {
                 "n": list(GRID_SIZES),
                 "warmup_frames": GRID_WARMUP,
