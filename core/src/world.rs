@@ -292,33 +292,42 @@ fn same_objects(
         })
         .collect();
     let k = tables.class_count();
-    for a in 0..count {
-        for b in a + 1..count {
-            let ((position_a, covariance_a), (position_b, covariance_b)) = (point(a), point(b));
-            let delta: Vec<f64> = (0..d).map(|i| position_a[i] - position_b[i]).collect();
-            let mut squared = 0.0;
-            for value in &delta {
-                squared += value * value;
+    let mut link = |a: usize, b: usize| {
+        let ((position_a, covariance_a), (position_b, covariance_b)) = (point(a), point(b));
+        let delta: Vec<f64> = (0..d).map(|i| position_a[i] - position_b[i]).collect();
+        let mut squared = 0.0;
+        for value in &delta {
+            squared += value * value;
+        }
+        if squared > SAME_OBJECT_GATE * (spread[a] + spread[b]) {
+            return;
+        }
+        if !coinciding(&delta, covariance_a, covariance_b, d) {
+            return;
+        }
+        let (first, second) = (&marginals[candidates[a]], &marginals[candidates[b]]);
+        if together.contains(&first.lineage) && together.contains(&second.lineage) {
+            return; // the most probable hypothesis holds both: two objects
+        }
+        let (ca, cb) = (
+            state.tracks[&first.key].version.cls,
+            state.tracks[&second.key].version.cls,
+        );
+        if !tables.compatible[ca * k + cb] {
+            return;
+        }
+        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+        parent[ra] = rb;
+    };
+    let positions: Vec<&[f64]> = (0..count).map(|i| point(i).0).collect();
+    match near_pairs(&positions, &spread) {
+        Some(pairs) => pairs.into_iter().for_each(|(a, b)| link(a, b)),
+        None => {
+            for a in 0..count {
+                for b in a + 1..count {
+                    link(a, b);
+                }
             }
-            if squared > SAME_OBJECT_GATE * (spread[a] + spread[b]) {
-                continue;
-            }
-            if !coinciding(&delta, covariance_a, covariance_b, d) {
-                continue;
-            }
-            let (first, second) = (&marginals[candidates[a]], &marginals[candidates[b]]);
-            if together.contains(&first.lineage) && together.contains(&second.lineage) {
-                continue; // the most probable hypothesis holds both: two objects
-            }
-            let (ca, cb) = (
-                state.tracks[&first.key].version.cls,
-                state.tracks[&second.key].version.cls,
-            );
-            if !tables.compatible[ca * k + cb] {
-                continue;
-            }
-            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
-            parent[ra] = rb;
         }
     }
     // groups in order of their first member
@@ -389,6 +398,45 @@ fn same_objects(
     let mut out: Vec<Marginal> = result.into_iter().flatten().collect();
     out.extend(appended);
     out
+}
+
+/// Up to this many candidates every pair is tested (`nearby.DENSE_PAIRS`: 64^2 pairs).
+const DENSE_CANDIDATES: usize = 64;
+/// The sweep's window widened against rounding: it may only admit more pairs to the
+/// exact test, never fewer.
+const WIDEN: f64 = 1.0 + 1e-9;
+
+/// The pairs `(a, b)`, `a < b`, in the dense test's order, that may pass its cheap
+/// bound `|x_a - x_b|^2 <= SAME_OBJECT_GATE (s_a + s_b)` (`s`: each covariance's trace):
+/// a superset of the pairs that do, found by a sweep along the first axis, as the
+/// specification finds them with a k-d tree (`nearby.close_pairs`). `None` (test every
+/// pair) for a few candidates, and when a position or a spread is not finite (the dense
+/// test's comparisons decide those).
+fn near_pairs(positions: &[&[f64]], spread: &[f64]) -> Option<Vec<(usize, usize)>> {
+    let count = positions.len();
+    let finite = positions.iter().all(|p| p.iter().all(|v| v.is_finite()))
+        && spread.iter().all(|s| s.is_finite());
+    if count <= DENSE_CANDIDATES || !finite {
+        return None;
+    }
+    let widest = spread.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let mut order: Vec<usize> = (0..count).collect();
+    order.sort_by(|&a, &b| positions[a][0].total_cmp(&positions[b][0]));
+    let mut pairs = Vec::new();
+    for (at, &i) in order.iter().enumerate() {
+        // |x_a - x_b|^2 >= (x0_a - x0_b)^2, and s_a + s_b <= s_i + the widest spread
+        let bound = SAME_OBJECT_GATE * (spread[i] + widest);
+        let reach = if bound > 0.0 { bound * WIDEN } else { bound };
+        for &j in &order[at + 1..] {
+            let gap = positions[j][0] - positions[i][0];
+            if gap * gap > reach {
+                break;
+            }
+            pairs.push((i.min(j), i.max(j)));
+        }
+    }
+    pairs.sort_unstable();
+    Some(pairs)
 }
 
 /// The world of `state` predicted to `at` (`WorldModel._marginals` and
@@ -488,4 +536,98 @@ pub fn at(
         })
         .collect();
     Ok((predicted, merged))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic generator of test numbers in `[0, 1)` (no dependency).
+    struct Numbers(u64);
+
+    impl Numbers {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// The pairs `same_objects`' dense test lets past its cheap bound, in its order.
+    fn passing(positions: &[Vec<f64>], spread: &[f64]) -> Vec<(usize, usize)> {
+        let mut pairs = Vec::new();
+        for a in 0..positions.len() {
+            for b in a + 1..positions.len() {
+                let squared: f64 = positions[a]
+                    .iter()
+                    .zip(&positions[b])
+                    .map(|(p, q)| (p - q) * (p - q))
+                    .fold(0.0, |total, value| total + value);
+                if squared <= SAME_OBJECT_GATE * (spread[a] + spread[b]) {
+                    pairs.push((a, b));
+                }
+            }
+        }
+        pairs
+    }
+
+    #[test]
+    fn the_sweep_finds_every_pair_the_dense_bound_passes() {
+        for (seed, d, scale) in [(1, 2, 10.0), (2, 3, 1.0), (3, 2, 0.5), (4, 2, 100.0)] {
+            let mut numbers = Numbers(seed);
+            let count = 300;
+            // clusters one metre apart, some points sharing their first coordinate
+            let positions: Vec<Vec<f64>> = (0..count)
+                .map(|i| {
+                    let cluster = (i % 20) as f64;
+                    (0..d)
+                        .map(|axis| {
+                            if axis == 0 && i % 7 == 0 {
+                                cluster
+                            } else {
+                                cluster + scale * numbers.next()
+                            }
+                        })
+                        .collect()
+                })
+                .collect();
+            let spread: Vec<f64> = (0..count)
+                .map(|_| numbers.next() * numbers.next())
+                .collect();
+            let views: Vec<&[f64]> = positions.iter().map(|p| &p[..]).collect();
+            let pairs = near_pairs(&views, &spread).expect("a sweep above the dense size");
+            assert!(
+                pairs.windows(2).all(|w| w[0] < w[1]),
+                "in order, each pair once"
+            );
+            let found: KeySet<(usize, usize)> = pairs.iter().copied().collect();
+            let needed = passing(&positions, &spread);
+            assert!(!needed.is_empty(), "seed {seed}: no pair to find");
+            for pair in &needed {
+                assert!(found.contains(pair), "seed {seed}: {pair:?} missed");
+            }
+            assert!(
+                pairs.len() < count * (count - 1) / 2,
+                "seed {seed}: nothing pruned"
+            );
+        }
+    }
+
+    #[test]
+    fn few_or_not_finite_candidates_are_tested_pair_by_pair() {
+        let positions: Vec<Vec<f64>> = (0..100).map(|i| vec![i as f64, 0.0]).collect();
+        let views: Vec<&[f64]> = positions.iter().map(|p| &p[..]).collect();
+        let spread = vec![0.5; 100];
+        assert!(near_pairs(&views[..DENSE_CANDIDATES], &spread[..DENSE_CANDIDATES]).is_none());
+        assert!(near_pairs(&views, &spread).is_some());
+        let mut spread_nan = spread.clone();
+        spread_nan[3] = f64::NAN;
+        assert!(near_pairs(&views, &spread_nan).is_none());
+        let mut with_infinity = positions.clone();
+        with_infinity[5][1] = f64::INFINITY;
+        let views: Vec<&[f64]> = with_infinity.iter().map(|p| &p[..]).collect();
+        assert!(near_pairs(&views, &spread).is_none());
+    }
 }
