@@ -112,6 +112,61 @@ pub fn coinciding(delta: &[f64], pa: &[f64], pb: &[f64], d: usize) -> bool {
     d2 + spread <= SAME_OBJECT_GATE
 }
 
+/// Each lineage's existence summed over the versions of it a cluster's hypotheses hold
+/// (`totals` in `_current` and `_marginals`), in order of first appearance, and the
+/// version shown for it: the first in which it is present (existence in the region at
+/// least `floor`), not a stale one that left the region long ago; else its first.
+struct LineageTotals {
+    floor: f64,
+    totals: Vec<(u64, f64)>,
+    at: KeyMap<u64, usize>,
+    chosen: KeyMap<u64, Key>,
+    present_in: KeySet<u64>,
+}
+
+impl LineageTotals {
+    /// Room for `lineages` without growing.
+    fn new(floor: f64, lineages: usize) -> LineageTotals {
+        let mut at = KeyMap::default();
+        at.reserve(lineages);
+        let mut chosen = KeyMap::default();
+        chosen.reserve(lineages);
+        let mut present_in = KeySet::default();
+        present_in.reserve(lineages);
+        LineageTotals {
+            floor,
+            totals: Vec::with_capacity(lineages),
+            at,
+            chosen,
+            present_in,
+        }
+    }
+
+    /// Version `key` of `lineage`, of probability mass `p`, present (existence times
+    /// the probability of being in the region) with `present`.
+    fn add(&mut self, lineage: u64, key: Key, p: f64, present: f64) {
+        match self.at.get(&lineage) {
+            Some(&i) => self.totals[i].1 += p * present,
+            None => {
+                self.at.insert(lineage, self.totals.len());
+                self.totals.push((lineage, 0.0 + p * present));
+            }
+        }
+        if present >= self.floor && !self.present_in.contains(&lineage) {
+            self.present_in.insert(lineage);
+            self.chosen.insert(lineage, key);
+        }
+        self.chosen.entry(lineage).or_insert(key);
+    }
+
+    /// `(lineage, total, key shown)` in order of first appearance.
+    fn rows(&self) -> impl Iterator<Item = (u64, f64, Key)> + '_ {
+        self.totals
+            .iter()
+            .map(|&(lineage, total)| (lineage, total, self.chosen[&lineage]))
+    }
+}
+
 /// The published world at the state's time (`WorldModel._current`): `(lineage, key)` of
 /// each object shown, in the order the specification's dict holds them. `shown`: the
 /// lineages published now; `ids`: their ids (to keep ids stable when lineages group).
@@ -155,13 +210,7 @@ pub fn current(
     summaries.reserve(versions);
     let mut kept: Summaries = KeyMap::default();
     kept.reserve(versions);
-    let mut totals: Vec<(u64, f64)> = Vec::with_capacity(versions);
-    let mut total_at: KeyMap<u64, usize> = KeyMap::default();
-    total_at.reserve(versions);
-    let mut chosen: KeyMap<u64, Key> = KeyMap::default();
-    chosen.reserve(versions);
-    let mut present_in: KeySet<u64> = KeySet::default();
-    present_in.reserve(versions);
+    let mut totals = LineageTotals::new(floor, versions);
     for cluster in &state.clusters {
         // each version's probability mass, in order of first appearance
         let mut mass: Vec<(Key, f64)> = Vec::with_capacity(cluster.keys.len());
@@ -193,27 +242,15 @@ pub fn current(
                     made
                 })
                 .inside;
-            let present = entry.existence * inside;
-            match total_at.get(&lineage) {
-                Some(&i) => totals[i].1 += p * present,
-                None => {
-                    total_at.insert(lineage, totals.len());
-                    totals.push((lineage, 0.0 + p * present));
-                }
-            }
-            if present >= floor && !present_in.contains(&lineage) {
-                present_in.insert(lineage);
-                chosen.insert(lineage, key);
-            }
-            chosen.entry(lineage).or_insert(key);
+            totals.add(lineage, key, p, entry.existence * inside);
         }
     }
     let marginals: Vec<Marginal> = totals
-        .iter()
-        .map(|&(lineage, existence)| Marginal {
+        .rows()
+        .map(|(lineage, existence, key)| Marginal {
             lineage,
             existence,
-            key: chosen[&lineage],
+            key,
         })
         .collect();
     *cache = kept;
@@ -475,37 +512,18 @@ pub fn at(
     let mut result: Vec<(Marginal, usize)> = Vec::new();
     let mut result_at: KeyMap<u64, usize> = KeyMap::default();
     for cluster in &state.clusters {
-        let mut totals: Vec<(u64, f64)> = Vec::new();
-        let mut total_at: KeyMap<u64, usize> = KeyMap::default();
-        let mut chosen: KeyMap<u64, Key> = KeyMap::default();
-        let mut present_in: KeySet<u64> = KeySet::default();
+        // the most probable hypothesis first: it shows each lineage where present
+        let mut totals = LineageTotals::new(floor, cluster.keys.len());
         for h in &cluster.hypotheses {
             let p = h.log_weight.exp();
             for &key in &h.keys {
                 let row = row_of[&key];
-                if gone[row] {
-                    continue;
+                if !gone[row] {
+                    totals.add(versions[row].lineage, key, p, existence[row] * inside[row]);
                 }
-                let lineage = versions[row].lineage;
-                let present = existence[row] * inside[row];
-                match total_at.get(&lineage) {
-                    Some(&i) => totals[i].1 += p * present,
-                    None => {
-                        total_at.insert(lineage, totals.len());
-                        totals.push((lineage, 0.0 + p * present));
-                    }
-                }
-                // shown in the most probable hypothesis's version in which it is
-                // present, not in a stale version that left the region long ago
-                if present >= floor && !present_in.contains(&lineage) {
-                    present_in.insert(lineage);
-                    chosen.insert(lineage, key);
-                }
-                chosen.entry(lineage).or_insert(key);
             }
         }
-        for (lineage, total) in totals {
-            let key = chosen[&lineage];
+        for (lineage, total, key) in totals.rows() {
             let marginal = Marginal {
                 lineage,
                 existence: total.min(1.0),
