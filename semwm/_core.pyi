@@ -243,6 +243,7 @@ class Engine:
         ids: Mapping[int, int],
         lost: bool,
         next_id: int,
+        waiting: Sequence[tuple[int, int]] = ...,
     ) -> tuple[dict[int, VersionRef] | None, tuple[dict[int, int], Published, int] | None]: ...
 
 class Published(Mapping[int, VersionRef]):

@@ -1147,9 +1147,15 @@ class WorldModel:
         core = self._mhf._core
         state = self._state
         if core is not None and isinstance(state, CoreState) and state.engine is core:
-            # the core gives the common case itself (core/src/python/engine.rs)
+            # the core gives the common cases itself (core/src/python/engine.rs)
+            waiting = self._still_waiting(state.time)
             shown, unchanged = core.engine.publish(
-                state, self._published, self._ids, bool(self._lost), self._next_id
+                state,
+                self._published,
+                self._ids,
+                waiting is None,
+                self._next_id,
+                waiting if waiting is not None else [],
             )
             if unchanged is None:
                 assert shown is not None
@@ -1166,6 +1172,26 @@ class WorldModel:
             self._publish_unchanged(current)
         else:
             self._publish_changed(current)
+
+    def _still_waiting(self, now: float | None) -> list[tuple[int, int]] | None:
+        """The ids waiting for their objects (``(id, lineage)``) when each will still
+        wait at ``now`` unless its object is shown again or an object new to the
+        published world may take it (what the core's publishing checks): ``mht``, each
+        already found able to return (:meth:`_returnable`), none waiting longer than
+        ``id_memory``. ``None`` when :meth:`_publish_changed` must see them."""
+        lost = self._lost
+        if not lost:
+            return []
+        if not self._mhf.mht or now is None:
+            return None
+        memory = self._knowledge.world.id_memory
+        returning = self._returning
+        waiting = []
+        for object_id, pub in lost.items():
+            if now - pub.lost_at > memory or returning.get(id(pub)) is not pub:
+                return None
+            waiting.append((object_id, pub.lineage))
+        return waiting
 
     def _publish_changed(self, current: Mapping[int, Track | VersionRef]) -> None:
         """:meth:`_publish` in general: ``current`` the published world now."""

@@ -93,5 +93,22 @@ def test_a_knowledge_change_tests_waiting_ids_again(engine: Engine, tmp_path: Pa
     edited = tmp_path / "sim2_two_doors.yaml"
     edited.write_text(yaml.safe_dump(document))
     model.replace_knowledge(load_knowledge(edited))
+    camera.scans(4.2)  # one scan: the waiting id is tested again, and no longer waits
+    assert before not in model._lost
     camera.scans(5.5, MIDDLE)
+    assert _id_at(model, MIDDLE) != before
+
+
+def test_an_id_waits_id_memory_seconds(engine: Engine) -> None:
+    """An id lost in the room waits ``id_memory`` (5 s) for its object while other
+    objects are seen, and no longer: whoever is found there afterwards gets a new id."""
+    model = WorldModel(load_knowledge(shipped_knowledge_path("sim2.yaml")), engine=engine)
+    camera = _Camera(model)
+    camera.scans(2.0, MIDDLE)
+    before = _id_at(model, MIDDLE)
+    camera.scans(6.0)
+    assert before in model._lost
+    camera.scans(9.0)
+    assert before not in model._lost
+    camera.scans(10.5, MIDDLE)
     assert _id_at(model, MIDDLE) != before

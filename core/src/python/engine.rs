@@ -365,6 +365,22 @@ fn published_lineages(published: &Bound<'_, PyAny>) -> PyResult<Vec<u64>> {
 }
 
 impl PyEngine {
+    /// Every lineage `state` (a `CoreState`) holds; empty if it is not one.
+    fn lineages_of(&self, state: &Bound<'_, PyAny>) -> KeySet<u64> {
+        let core = state
+            .getattr("core")
+            .and_then(|core| core.extract::<PyRef<'_, PyState>>().map_err(PyErr::from));
+        match core {
+            Ok(core) => core
+                .state
+                .tracks
+                .values()
+                .map(|e| e.version.lineage)
+                .collect(),
+            Err(_) => KeySet::default(),
+        }
+    }
+
     /// A scan's `Measurement` named tuples as the core's measurements (see
     /// `process_measurements`).
     fn read_measurements(&self, measurements: &Bound<'_, PyList>) -> PyResult<Vec<Measurement>> {
@@ -723,13 +739,18 @@ impl PyEngine {
             .collect()
     }
 
-    /// `WorldModel._publish` of `state` (a `CoreState`) with its common case here:
+    /// `WorldModel._publish` of `state` (a `CoreState`) with its common cases here:
     /// `(current, unchanged)`, one of them `None`. `unchanged` when no published object
-    /// left the world (`lost` is empty, every lineage with an id and every published one
-    /// is shown): `(ids, published, next_id)` as `WorldModel._publish_unchanged` makes
+    /// left the world (every lineage with an id and every published one is shown) and
+    /// either no id waits for its object (`lost` false, `waiting` empty) or the ids
+    /// that wait (`waiting`: their `(id, lineage)`, each already found able to return)
+    /// keep waiting: no lineage is new, none of theirs is shown, no shown object holds
+    /// one. Then `(ids, published, next_id)` as `WorldModel._publish_unchanged` makes
     /// them, new lineages taking the next ids in the published world's order (`ids`
     /// itself when there are none), `published` a `Published` table. Otherwise
-    /// `current` as `Engine.current` gives it, for `WorldModel._publish_changed`.
+    /// `current` as `Engine.current` gives it, for `WorldModel._publish_changed`
+    /// (always when `lost`: waiting ids the core is not told of).
+    #[pyo3(signature = (state, published, ids, lost, next_id, waiting=Vec::new()))]
     fn publish<'py>(
         slf: &Bound<'py, Self>,
         state: &Bound<'py, PyAny>,
@@ -737,6 +758,7 @@ impl PyEngine {
         ids: &Bound<'py, PyDict>,
         lost: bool,
         next_id: i64,
+        waiting: Vec<(i64, u64)>,
     ) -> PyResult<(Option<Bound<'py, PyDict>>, Option<Unchanged<'py>>)> {
         let py = state.py();
         let engine = slf.get();
@@ -744,9 +766,30 @@ impl PyEngine {
         let before: KeySet<u64> = published_lineages(published)?.into_iter().collect();
         let rows = engine.current_rows(state, before.clone(), &table)?;
         let showing: KeySet<u64> = rows.iter().map(|row| row.0).collect();
+        // a lineage with an id that is not shown: the one of an id waiting for it, still
+        // held by the state (the general path drops the ids of lineages gone)
+        let mut alive: Option<KeySet<u64>> = None;
+        let mut unshown_waits = |lineage: u64, id: i64| {
+            waiting.contains(&(id, lineage))
+                && alive
+                    .get_or_insert_with(|| engine.lineages_of(state))
+                    .contains(&lineage)
+        };
+        let still_waiting = || {
+            rows.iter().all(|&(lineage, ..)| {
+                table.get(&lineage).is_some_and(|id| {
+                    waiting
+                        .iter()
+                        .all(|&(lost_id, lost_lineage)| lost_id != *id && lost_lineage != lineage)
+                })
+            })
+        };
         let left = lost
-            || table.keys().any(|lineage| !showing.contains(lineage))
-            || before.iter().any(|lineage| !showing.contains(lineage));
+            || table
+                .iter()
+                .any(|(&lineage, &id)| !showing.contains(&lineage) && !unshown_waits(lineage, id))
+            || before.iter().any(|lineage| !showing.contains(lineage))
+            || (!waiting.is_empty() && !still_waiting());
         if left {
             return Ok((Some(engine.current_refs(state, &rows)?), None));
         }
