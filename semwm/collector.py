@@ -8,7 +8,9 @@ live object of the process (numpy's and scipy's included): on a static grid of
 100 objects that is about 20 % of the CPU per frame. Paused during
 :meth:`semwm.WorldModel.ingest`, the collector runs its collections between batches
 instead, as allocations continue after it; reference counting frees everything
-that is not a cycle at once either way, so memory use is the same.
+that is not a cycle at once either way, so memory use is the same. A small batch the
+Rust engine takes in one call is not paused: it makes a few dozen Python objects, and
+the pause (about a microsecond) would cost more than the collections it defers.
 
 The collector is process-wide: the pause is counted, so that concurrent ingests
 (several models, several threads) resume it only when the last one ends, and only

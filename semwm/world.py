@@ -87,6 +87,9 @@ _HANDOVER_GATE = 13.8  # chi-square 99.9 % for 2 degrees of freedom; ids move on
 _SAME_OBJECT_GATE = 1.0  # 4 x Bhattacharyya distance: two lineages' estimates coincide
 _GROUPING_FLOOR = 1e-3  # lineages less likely than this are not grouped
 _TENTATIVE_FLOOR = 1e-12  # a tentative object by id: whatever its existence
+# a batch of at most this many detections the Rust engine takes in one call makes so few
+# Python objects that pausing the collector (semwm.collector) costs more than it saves
+_UNPAUSED_BATCH = 64
 
 
 IgnoreReason = Literal["out_of_range", "outside_region"]
@@ -191,6 +194,10 @@ class _Lost(NamedTuple):
 
 _Floor = tuple[ScanKey, str]
 """No scan at or before this key may be processed any more, and why."""
+
+_Read = tuple[int, dict[ScanKey, Sequence[Measurement]], list["IgnoredDetection"]]
+"""The Rust engine's reading of a plain batch (:meth:`WorldModel._read_plain`): how many
+detections are used, their scans, and why each other one is not."""
 
 
 def _same_tables(a: _Tables, b: _Tables) -> bool:
@@ -526,22 +533,38 @@ class WorldModel:
         OutOfOrderError
             A detection is older than the reorder window allows; nothing applied.
 
-        Python's cyclic garbage collector is paused meanwhile (:mod:`semwm.collector`).
+        Python's cyclic garbage collector is paused meanwhile (:mod:`semwm.collector`),
+        except for a small batch the Rust engine takes in one call, which makes too few
+        Python objects for the pause to pay.
         """
+        batch = as_batch(detections)
+        if len(batch) <= _UNPAUSED_BATCH:
+            read = self._read_plain(batch, sensor)
+            done = self._ingest_one(batch, sensor, read)
+            if done is not None:
+                return done
+            with collector_paused():
+                return self._ingest(batch, sensor, read)
         with collector_paused():
-            return self._ingest(detections, sensor)
+            read = self._read_plain(batch, sensor)
+            done = self._ingest_one(batch, sensor, read)
+            return done if done is not None else self._ingest(batch, sensor, read)
+
+    def _ingest_one(
+        self, batch: list[DetectionInput], sensor: object, read: _Read | None
+    ) -> IngestResult | None:
+        """:meth:`_ingest_scan` when the batch is one scan the Rust engine's reader read
+        whole (``read``), without a sensor report or a hold; else ``None``."""
+        if read is None or sensor is not None or len(read[1]) != 1 or self._hold != 0:
+            return None
+        return self._ingest_scan(read[0], read[1], len(batch), read[2])
 
     def _ingest(
         self,
-        detections: DetectionInput | Iterable[DetectionInput],
+        batch: list[DetectionInput],
         sensor: SensorReport | Mapping[str, Any] | None,
+        read: _Read | None,
     ) -> IngestResult:
-        batch = as_batch(detections)
-        read = self._read_plain(batch, sensor)
-        if read is not None and sensor is None and len(read[1]) == 1 and self._hold == 0:
-            done = self._ingest_scan(read[0], read[1], len(batch), read[2])
-            if done is not None:
-                return done
         if read is not None and sensor is None:  # the common batch: its scans as read
             applied, skipped = read[0], read[2]
             grouped: tuple[dict[ScanKey, Sequence[Measurement]], dict[ScanKey, SensorView]]
@@ -632,9 +655,7 @@ class WorldModel:
         self._seq += size
         return IngestResult(applied, after_state.time, len(skipped), tuple(skipped))
 
-    def _read_plain(
-        self, batch: list[DetectionInput], sensor: object
-    ) -> tuple[int, dict[ScanKey, Sequence[Measurement]], list[IgnoredDetection]] | None:
+    def _read_plain(self, batch: list[DetectionInput], sensor: object) -> _Read | None:
         """The Rust engine's reading of a plain batch (``semwm._core.DetectionReader``):
         how many detections are used, their scans, and why each other one is not
         (:meth:`_ignored_apart`); ``None`` when the batch takes the specification's path

@@ -1,5 +1,6 @@
 """The cyclic garbage collector is paused while a batch is processed and resumed after,
-as it was, however pauses overlap."""
+as it was, however pauses overlap; not for a small batch the Rust engine takes in one
+call (``WorldModel._ingest_scan``), which makes too few Python objects for it to pay."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import pytest
 
 from semwm.collector import collector_paused
 from semwm.detection import DetectionError
+from semwm.filters.engine import rust_core
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.world import WorldModel
@@ -73,3 +75,29 @@ def test_ingest_processes_with_the_collector_paused_even_when_it_refuses() -> No
     with pytest.raises(DetectionError):
         model.ingest([{"time": 2.0, "class": "Nope", "position": [1.0, 1.0]}])
     assert gc.isenabled()
+
+
+@pytest.mark.skipif(rust_core() is None, reason="the Rust core is not built")
+def test_a_scan_in_one_call_pauses_the_collector_only_when_large() -> None:
+    model = WorldModel(load_knowledge(shipped_knowledge_path("sim1.yaml")), engine="rust")
+    during: list[bool] = []
+    one_call = model._ingest_scan
+
+    def watched(*args: object) -> object:
+        enabled = gc.isenabled()
+        done = one_call(*args)  # type: ignore[arg-type]
+        if done is not None:  # taken in one call
+            during.append(enabled)
+        return done
+
+    model._ingest_scan = watched  # type: ignore[method-assign]
+
+    def scan(time: float, size: int) -> list[dict[str, object]]:
+        return [
+            {"time": time, "class": "Cup", "position": [0.1 + 0.1 * i, 1.0]} for i in range(size)
+        ]
+
+    model.ingest(scan(1.0, 2))  # the first scan: the general path
+    model.ingest(scan(2.0, 2))
+    model.ingest(scan(3.0, 80))
+    assert during == [True, False] and gc.isenabled()
