@@ -37,6 +37,8 @@ class ClassesHeld(ValueError):
 
 def as_batch(detections: DetectionInput | Iterable[DetectionInput]) -> list[DetectionInput]:
     """One detection or an iterable of them, as a list."""
+    if type(detections) is list:  # the common batch, without the Mapping ABC's check
+        return list(detections)
     if isinstance(detections, Detection | Mapping):
         return [detections]
     return list(detections)
