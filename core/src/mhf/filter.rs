@@ -28,7 +28,7 @@ use crate::mhf::association::{self, Inputs, ScanOption};
 use crate::mhf::coverage::symmetric_eigen;
 use crate::mhf::existence::{inside_probability, missed, survive};
 use crate::mhf::expansion::{self, split_with, Op};
-use crate::mhf::hypotheses::{fsum, prune, Cluster, Hypothesis, KeyMap, KeySet, Merged};
+use crate::mhf::hypotheses::{fsum, key_union, prune, Cluster, Hypothesis, KeyMap, KeySet, Merged};
 use crate::mhf::measurement::{Measurement, SensorView};
 use crate::mhf::predict::{predict, Predicted};
 use crate::mhf::rates::{watched, Name, ObservedRates, ScanCoverage, ScanReport, WatchedObject};
@@ -602,12 +602,7 @@ impl Filter {
                 }
             }
         }
-        let mut referenced: Vec<Key> = final_clusters
-            .iter()
-            .flat_map(|c| c.keys.iter().copied())
-            .collect();
-        referenced.sort_unstable();
-        referenced.dedup();
+        let referenced = key_union(final_clusters.iter().map(|c| c.keys.as_slice()));
         let mut tracks = BTreeMap::new();
         for key in &referenced {
             let version = table.version(*key)?.clone();

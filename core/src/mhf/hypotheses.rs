@@ -87,15 +87,18 @@ pub struct Cluster {
     pub keys: Vec<u64>,
 }
 
+/// The union of key sets, sorted, each key once.
+pub fn key_union<'a>(sets: impl IntoIterator<Item = &'a [u64]>) -> Vec<u64> {
+    let mut keys: Vec<u64> = sets.into_iter().flatten().copied().collect();
+    keys.sort_unstable();
+    keys.dedup();
+    keys
+}
+
 impl Cluster {
     /// The cluster of `hypotheses`, its keys their union (`Cluster.of`).
     pub fn of(hypotheses: Vec<Hypothesis>) -> Cluster {
-        let mut keys: Vec<u64> = hypotheses
-            .iter()
-            .flat_map(|h| h.keys.iter().copied())
-            .collect();
-        keys.sort_unstable();
-        keys.dedup();
+        let keys = key_union(hypotheses.iter().map(|h| h.keys.as_slice()));
         Cluster { hypotheses, keys }
     }
 

@@ -31,7 +31,7 @@ use std::sync::Arc;
 
 use crate::error::{KernelError, KernelResult};
 use crate::filters::small::MAX_STATE;
-use crate::mhf::hypotheses::{log_add, ties_in_order, Hypothesis, KeyMap, KeySet};
+use crate::mhf::hypotheses::{key_union, log_add, ties_in_order, Hypothesis, KeyMap, KeySet};
 use crate::mhf::state::{FilterState, Key, Version};
 
 /// Existence, model and class probabilities agree within this (`PROBABILITY_TOLERANCE`).
@@ -654,12 +654,7 @@ pub fn merge_similar(
     existence: &KeyMap<Key, f64>,
     max_distance: f64,
 ) -> KernelResult<Option<Vec<Hypothesis>>> {
-    let mut keys: Vec<Key> = hypotheses
-        .iter()
-        .flat_map(|h| h.keys.iter().copied())
-        .collect();
-    keys.sort_unstable();
-    keys.dedup();
+    let keys = key_union(hypotheses.iter().map(|h| h.keys.as_slice()));
     merge_similar_in(&keys, hypotheses, versions, existence, max_distance)
 }
 
