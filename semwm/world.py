@@ -81,6 +81,7 @@ from semwm.world_types import (
 
 if TYPE_CHECKING:
     from semwm._core import VersionRef
+    from semwm.mhf.core_engine import CoreEngine
 
 ScanKey = tuple[float, str]
 _HANDOVER_GATE = 13.8  # chi-square 99.9 % for 2 degrees of freedom; ids move only this close
@@ -540,24 +541,15 @@ class WorldModel:
         batch = as_batch(detections)
         if len(batch) <= _UNPAUSED_BATCH:
             read = self._read_plain(batch, sensor)
-            done = self._ingest_one(batch, sensor, read)
+            done = None if sensor is not None else self._ingest_scan(read, len(batch))
             if done is not None:
                 return done
             with collector_paused():
                 return self._ingest(batch, sensor, read)
         with collector_paused():
             read = self._read_plain(batch, sensor)
-            done = self._ingest_one(batch, sensor, read)
+            done = None if sensor is not None else self._ingest_scan(read, len(batch))
             return done if done is not None else self._ingest(batch, sensor, read)
-
-    def _ingest_one(
-        self, batch: list[DetectionInput], sensor: object, read: _Read | None
-    ) -> IngestResult | None:
-        """:meth:`_ingest_scan` when the batch is one scan the Rust engine's reader read
-        whole (``read``), without a sensor report or a hold; else ``None``."""
-        if read is None or sensor is not None or len(read[1]) != 1 or self._hold != 0:
-            return None
-        return self._ingest_scan(read[0], read[1], len(batch), read[2])
 
     def _ingest(
         self,
@@ -608,22 +600,20 @@ class WorldModel:
             ignored_detections=tuple(skipped),
         )
 
-    def _ingest_scan(
-        self,
-        applied: int,
-        scans: dict[ScanKey, Sequence[Measurement]],
-        size: int,
-        skipped: list[IgnoredDetection],
-    ) -> IngestResult | None:
-        """:meth:`_ingest` of a batch the Rust engine's reader read whole into one scan,
-        without a sensor report or a hold, after every logged scan: what the general
-        path does (its checks, :meth:`_process_scans`, :meth:`_publish`), with no call
-        that case does not need. ``None`` (nothing done) when the batch is not that
-        case, or the state not the ``mht`` core's: the general path takes it."""
+    def _ingest_scan(self, read: _Read | None, size: int) -> IngestResult | None:
+        """:meth:`_ingest` of a batch of ``size`` detections the Rust engine's reader
+        read whole into one scan (``read``), without a sensor report or a hold, after
+        every logged scan: what the general path does (its checks,
+        :meth:`_process_scans`, :meth:`_publish`), with no call that case does not need.
+        ``None`` (nothing done) when the batch is not that case, or the state not the
+        ``mht`` core's: the general path takes it."""
         core = self._mhf._core
         state, book = self._state, self._book
         if (
-            core is None
+            read is None
+            or len(read[1]) != 1
+            or self._hold != 0
+            or core is None
             or not self._mhf.mht
             or type(state) is not CoreState
             or state.engine is not core
@@ -632,6 +622,7 @@ class WorldModel:
             or self._pending
         ):
             return None
+        applied, scans, skipped = read
         ((key, scan),) = scans.items()
         log = self._log
         if log and not log[-1].key < key:
@@ -648,10 +639,13 @@ class WorldModel:
         self._earliest = time if earliest is None or time < earliest else earliest
         after, after_book = core.engine.process_and_advance(state.core, book.core, scan)
         after_state = CoreState(after, core)
-        kept = [*log, _LoggedScan(key, scan, state, None, book)] if self.reorder_window > 0 else []
-        log, floor = self._trimmed(kept, after_state)
+        if self.reorder_window > 0:
+            kept = [*log, _LoggedScan(key, scan, state, None, book)]
+            log, floor = self._trimmed(kept, after_state)
+        else:  # nothing is kept for a replay
+            log, floor = [], self._replay_floor
         self._commit(after_state, log, CoreBook(after_book), floor)
-        self._publish()
+        self._publish_core(core, after_state)
         self._seq += size
         return IngestResult(applied, after_state.time, len(skipped), tuple(skipped))
 
@@ -1168,21 +1162,7 @@ class WorldModel:
         core = self._mhf._core
         state = self._state
         if core is not None and isinstance(state, CoreState) and state.engine is core:
-            # the core gives the common cases itself (core/src/python/engine.rs)
-            waiting = self._still_waiting(state.time)
-            shown, unchanged = core.engine.publish(
-                state,
-                self._published,
-                self._ids,
-                waiting is None,
-                self._next_id,
-                waiting if waiting is not None else [],
-            )
-            if unchanged is None:
-                assert shown is not None
-                self._publish_changed(shown)
-            else:  # the published table's values are made if someone reads them
-                self._ids, self._published, self._next_id = unchanged
+            self._publish_core(core, state)
             return
         current = self._current()
         if (
@@ -1193,6 +1173,24 @@ class WorldModel:
             self._publish_unchanged(current)
         else:
             self._publish_changed(current)
+
+    def _publish_core(self, core: CoreEngine, state: CoreState) -> None:
+        """:meth:`_publish` of a state of the Rust engine's core (``core``): the core gives
+        the common cases itself (``Engine.publish``, core/src/python/engine.rs)."""
+        waiting = self._still_waiting(state.time)
+        shown, unchanged = core.engine.publish(
+            state,
+            self._published,
+            self._ids,
+            waiting is None,
+            self._next_id,
+            waiting if waiting is not None else [],
+        )
+        if unchanged is None:
+            assert shown is not None
+            self._publish_changed(shown)
+        else:  # the published table's values are made if someone reads them
+            self._ids, self._published, self._next_id = unchanged
 
     def _still_waiting(self, now: float | None) -> list[tuple[int, int]] | None:
         """The ids waiting for their objects (``(id, lineage)``) when each will still
