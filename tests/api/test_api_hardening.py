@@ -125,11 +125,12 @@ def test_a_failed_change_applies_nothing_and_ready_reports_it(
         assert client.post("/detections", json=cup(1.0)).status_code == 200
         before = state(client)
 
-        def broken(self: WorldModel) -> None:
+        def broken(self: WorldModel, *args: object) -> None:
             raise KeyError("injected")
 
-        with monkeypatch.context() as patch:
+        with monkeypatch.context() as patch:  # publishing fails, on either engine's path
             patch.setattr(WorldModel, "_publish", broken)
+            patch.setattr(WorldModel, "_publish_core", broken)
             failed = client.post("/detections", json=cup(2.0, 3.0, 3.0))
             assert failed.status_code == 500
             assert client.get("/ready").status_code == 503

@@ -44,4 +44,5 @@ def test_publishing_never_changes_tables_it_gave_out(
         before = (dict(ids), dict(published), dict(lost))
         model.ingest(scan)
         assert (dict(ids), dict(published), dict(lost)) == before
-    assert len(calls) > 3  # the general path ran (an object left, an id waited)
+    # the general path ran: an object left, an id was handed over or stopped waiting
+    assert len(calls) >= 2
