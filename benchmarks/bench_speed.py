@@ -938,20 +938,25 @@ def markdown(doc: dict[str, Any]) -> str:
             "What grows: the same match once more per engine with `WorldModel.ingest` timed "
             "by stage (`bench_http.model_timers`, as below; a pass of its own, not the one "
             "above), µs per detection in each quarter, and the object versions and "
-            "hypotheses stored after a scan (the quarter's mean).",
+            "hypotheses stored after a scan (the quarter's mean). Core per version: the "
+            "core's µs per detection over the versions stored, what a detection costs per "
+            "version in play (a scan predicts, gates and weighs every version): flat when "
+            "the cost follows the scene's load and not the match's age.",
             "",
             "| engine | quarter | validate | core | publish | rest | versions stored | "
-            "hypotheses stored |",
-            "|---|---|---|---|---|---|---|---|",
+            "hypotheses stored | core per version |",
+            "|---|---|---|---|---|---|---|---|---|",
         ]
         for r in doc["long_split"]:
             for quarter in r["quarters"]:
                 u = quarter["us_per_detection"]
+                core, versions = u.get("core"), quarter["versions_mean"]
+                per_version = core / versions if core is not None and versions else None
                 lines.append(
                     f"| {r['engine']} | Q{quarter['quarter']} | {fmt(u.get('validate'))} | "
-                    f"{fmt(u.get('core'))} | {fmt(u.get('publish'))} | "
-                    f"{fmt(u.get('model'))} | {fmt(quarter['versions_mean'])} | "
-                    f"{fmt(quarter['hypotheses_mean'])} |"
+                    f"{fmt(core)} | {fmt(u.get('publish'))} | "
+                    f"{fmt(u.get('model'))} | {fmt(versions)} | "
+                    f"{fmt(quarter['hypotheses_mean'])} | {fmt(per_version)} |"
                 )
     lines += [
         "",
