@@ -6,7 +6,7 @@ counterpart in :mod:`semwm.filters.batched` and :mod:`semwm.filters.small`, and 
 definite) as the Python engine does.
 """
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any, overload
 
 import numpy as np
@@ -205,6 +205,23 @@ class Engine:
         view: tuple[object, ...] | None = None,
         source: str | None = None,
     ) -> tuple[State, Book]: ...
+    def process_and_publish(
+        self,
+        state: State,
+        book: Book,
+        measurements: Sequence[Measurement],
+        published: Mapping[int, Any],
+        ids: Mapping[int, int],
+        lost: bool,
+        next_id: int,
+        waiting: Sequence[tuple[int, int]],
+        make_state: Callable[[State], Any],
+    ) -> tuple[
+        Any,
+        Book,
+        dict[int, VersionRef] | None,
+        tuple[dict[int, int], Published, int] | None,
+    ]: ...
     def class_names(self) -> list[str]: ...
     def advance(
         self,

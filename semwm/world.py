@@ -80,7 +80,7 @@ from semwm.world_types import (
 )
 
 if TYPE_CHECKING:
-    from semwm._core import VersionRef
+    from semwm._core import Published, VersionRef
     from semwm.mhf.core_engine import CoreEngine
 
 ScanKey = tuple[float, str]
@@ -637,15 +637,27 @@ class WorldModel:
         newest, earliest = self._newest, self._earliest
         self._newest = time if newest is None or time > newest else newest
         self._earliest = time if earliest is None or time < earliest else earliest
-        after, after_book = core.engine.process_and_advance(state.core, book.core, scan)
-        after_state = CoreState(after, core)
+        # the scan, its confidences and its publishing (_publish_core) in one core call;
+        # the state after it is at the scan's time
+        waiting = self._still_waiting(time)
+        after_state, after_book, shown, unchanged = core.engine.process_and_publish(
+            state.core,
+            book.core,
+            scan,
+            self._published,
+            self._ids,
+            waiting is None,
+            self._next_id,
+            waiting if waiting is not None else [],
+            core.state_of,
+        )
         if self.reorder_window > 0:
             kept = [*log, _LoggedScan(key, scan, state, None, book)]
             log, floor = self._trimmed(kept, after_state)
         else:  # nothing is kept for a replay
             log, floor = [], self._replay_floor
         self._commit(after_state, log, CoreBook(after_book), floor)
-        self._publish_core(core, after_state)
+        self._published_core(shown, unchanged)
         self._seq += size
         return IngestResult(applied, after_state.time, len(skipped), tuple(skipped))
 
@@ -1186,6 +1198,16 @@ class WorldModel:
             self._next_id,
             waiting if waiting is not None else [],
         )
+        self._published_core(shown, unchanged)
+
+    def _published_core(
+        self,
+        shown: Mapping[int, VersionRef] | None,
+        unchanged: tuple[dict[int, int], Published, int] | None,
+    ) -> None:
+        """The tables after the core's publishing (``Engine.publish``): ``unchanged``
+        when it gave them, else ``shown``, the published world, for
+        :meth:`_publish_changed`."""
         if unchanged is None:
             assert shown is not None
             self._publish_changed(shown)

@@ -428,6 +428,10 @@ class CoreEngine:
         )
         return CoreState(after, self), CoreBook(after_book)
 
+    def state_of(self, core: _core.State) -> CoreState:
+        """The :class:`CoreState` of a state this engine's core made."""
+        return CoreState(core, self)
+
     def _view(self, view: SensorView) -> tuple[Any, ...]:
         return (
             float(view.time),

@@ -130,7 +130,7 @@ def test_a_failed_change_applies_nothing_and_ready_reports_it(
 
         with monkeypatch.context() as patch:  # publishing fails, on either engine's path
             patch.setattr(WorldModel, "_publish", broken)
-            patch.setattr(WorldModel, "_publish_core", broken)
+            patch.setattr(WorldModel, "_published_core", broken)
             failed = client.post("/detections", json=cup(2.0, 3.0, 3.0))
             assert failed.status_code == 500
             assert client.get("/ready").status_code == 503

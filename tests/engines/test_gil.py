@@ -8,6 +8,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
@@ -18,7 +19,10 @@ from . import needs_rust
 pytestmark = needs_rust
 
 
-def test_other_threads_run_while_the_core_scans() -> None:
+@pytest.mark.parametrize("call", ["process_measurements", "process_and_publish"])
+def test_other_threads_run_while_the_core_scans(call: str) -> None:
+    """``process_and_publish``: a scan, its confidences and its publishing in one call
+    (``WorldModel._ingest_scan``)."""
     knowledge = load_knowledge(shipped_knowledge_path("grid.yaml"))
     side = 150  # 22,500 new objects in one scan (30-60 ms): long enough to see threads interleave
     region = knowledge.world.region
@@ -50,7 +54,20 @@ def test_other_threads_run_while_the_core_scans() -> None:
     try:
         time.sleep(0.05)
         start = time.perf_counter()
-        core.engine.process_measurements(state, list(measurements))
+        if call == "process_measurements":
+            core.engine.process_measurements(state, list(measurements))
+        else:
+            core.engine.process_and_publish(
+                state,
+                core._core_book(model._book),
+                list(measurements),
+                {},
+                {},
+                False,
+                1,
+                [],
+                core.state_of,
+            )
         end = time.perf_counter()
     finally:
         done.set()

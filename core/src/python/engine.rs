@@ -364,6 +364,30 @@ fn published_lineages(published: &Bound<'_, PyAny>) -> PyResult<Vec<u64>> {
         .collect()
 }
 
+/// An object shown: (lineage, key, class, serial).
+type ShownRow = (u64, u64, usize, u64);
+
+/// `world::current` of `held` as rows, with the engine's cache of version summaries.
+fn shown_rows(
+    held: &State,
+    filter: &Filter,
+    summaries: &Mutex<Summaries>,
+    shown: &KeySet<u64>,
+    ids: &KeyMap<u64, i64>,
+) -> Vec<ShownRow> {
+    // a panic while it was held leaves summaries of versions, each whole
+    let mut cache = summaries
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    crate::world::current(held, &filter.tables, shown, ids, &mut cache)
+        .into_iter()
+        .map(|(lineage, key)| {
+            let entry = &held.tracks[&key];
+            (lineage, key, entry.version.cls, entry.serial)
+        })
+        .collect()
+}
+
 impl PyEngine {
     /// Every lineage `state` (a `CoreState`) holds; empty if it is not one.
     fn lineages_of(&self, state: &Bound<'_, PyAny>) -> KeySet<u64> {
@@ -379,6 +403,82 @@ impl PyEngine {
                 .collect(),
             Err(_) => KeySet::default(),
         }
+    }
+
+    /// `publish` once `rows` (`current_rows` of `state`, given `before`, the lineages
+    /// published, and `table`, the ids) are known.
+    #[allow(clippy::too_many_arguments)]
+    fn published_after<'py>(
+        &self,
+        state: &Bound<'py, PyAny>,
+        rows: &[ShownRow],
+        table: KeyMap<u64, i64>,
+        before: &KeySet<u64>,
+        ids: &Bound<'py, PyDict>,
+        lost: bool,
+        next_id: i64,
+        waiting: &[(i64, u64)],
+    ) -> PyResult<(Option<Bound<'py, PyDict>>, Option<Unchanged<'py>>)> {
+        let py = state.py();
+        let showing: KeySet<u64> = rows.iter().map(|row| row.0).collect();
+        // a lineage with an id that is not shown: the one of an id waiting for it, still
+        // held by the state (the general path drops the ids of lineages gone)
+        let mut alive: Option<KeySet<u64>> = None;
+        let mut unshown_waits = |lineage: u64, id: i64| {
+            waiting.contains(&(id, lineage))
+                && alive
+                    .get_or_insert_with(|| self.lineages_of(state))
+                    .contains(&lineage)
+        };
+        let still_waiting = || {
+            rows.iter().all(|&(lineage, ..)| {
+                table.get(&lineage).is_some_and(|id| {
+                    waiting
+                        .iter()
+                        .all(|&(lost_id, lost_lineage)| lost_id != *id && lost_lineage != lineage)
+                })
+            })
+        };
+        let left = lost
+            || table
+                .iter()
+                .any(|(&lineage, &id)| !showing.contains(&lineage) && !unshown_waits(lineage, id))
+            || before.iter().any(|lineage| !showing.contains(lineage))
+            || (!waiting.is_empty() && !still_waiting());
+        if left {
+            return Ok((Some(self.current_refs(state, rows)?), None));
+        }
+        let (mut table, mut next_id) = (table, next_id);
+        let mut copied: Option<Bound<'py, PyDict>> = None;
+        for &(lineage, ..) in rows {
+            if table.contains_key(&lineage) {
+                continue;
+            }
+            // a new table: one a query cached must not change
+            let fresh = match &copied {
+                Some(dict) => dict,
+                None => copied.insert(ids.copy()?),
+            };
+            fresh.set_item(lineage, next_id)?;
+            table.insert(lineage, next_id);
+            next_id += 1;
+        }
+        let shown = rows
+            .iter()
+            .map(|&(lineage, key, cls, serial)| Row {
+                id: table[&lineage],
+                lineage,
+                key,
+                serial,
+                cls,
+            })
+            .collect();
+        let names = self.names.iter().map(|name| name.clone_ref(py)).collect();
+        let shown = Bound::new(py, PyPublished::new(shown, names, state.clone().unbind()))?;
+        Ok((
+            None,
+            Some((copied.unwrap_or_else(|| ids.clone()), shown, next_id)),
+        ))
     }
 
     /// A scan's `Measurement` named tuples as the core's measurements (see
@@ -474,24 +574,13 @@ impl PyEngine {
         state: &Bound<'_, PyAny>,
         shown: KeySet<u64>,
         ids: &KeyMap<u64, i64>,
-    ) -> PyResult<Vec<(u64, u64, usize, u64)>> {
+    ) -> PyResult<Vec<ShownRow>> {
         let core: PyRef<'_, PyState> = state.getattr("core")?.extract()?;
         let filter = self.filter.clone();
         let held = core.state.clone();
         let summaries = self.summaries.clone();
         run(state.py(), "Engine.current", move || {
-            // a panic while it was held leaves summaries of versions, each whole
-            let mut cache = summaries
-                .lock()
-                .unwrap_or_else(|poisoned| poisoned.into_inner());
-            let pairs = crate::world::current(&held, &filter.tables, &shown, ids, &mut cache);
-            Ok(pairs
-                .into_iter()
-                .map(|(lineage, key)| {
-                    let entry = &held.tracks[&key];
-                    (lineage, key, entry.version.cls, entry.serial)
-                })
-                .collect::<Vec<_>>())
+            Ok(shown_rows(&held, &filter, &summaries, &shown, ids))
         })
     }
 
@@ -599,6 +688,15 @@ fn scan_rows(
 }
 
 type Unchanged<'py> = (Bound<'py, PyDict>, Bound<'py, PyPublished>, i64);
+
+/// `Engine.process_and_publish`'s answer: the state and book after the scan, and
+/// `publish`'s `(current, unchanged)`.
+type ScanPublished<'py> = (
+    Bound<'py, PyAny>,
+    PyBook,
+    Option<Bound<'py, PyDict>>,
+    Option<Unchanged<'py>>,
+);
 
 fn id_table(ids: &Bound<'_, PyDict>) -> PyResult<KeyMap<u64, i64>> {
     let mut table: KeyMap<u64, i64> = KeyMap::default();
@@ -760,70 +858,66 @@ impl PyEngine {
         next_id: i64,
         waiting: Vec<(i64, u64)>,
     ) -> PyResult<(Option<Bound<'py, PyDict>>, Option<Unchanged<'py>>)> {
-        let py = state.py();
         let engine = slf.get();
         let table = id_table(ids)?;
         let before: KeySet<u64> = published_lineages(published)?.into_iter().collect();
         let rows = engine.current_rows(state, before.clone(), &table)?;
-        let showing: KeySet<u64> = rows.iter().map(|row| row.0).collect();
-        // a lineage with an id that is not shown: the one of an id waiting for it, still
-        // held by the state (the general path drops the ids of lineages gone)
-        let mut alive: Option<KeySet<u64>> = None;
-        let mut unshown_waits = |lineage: u64, id: i64| {
-            waiting.contains(&(id, lineage))
-                && alive
-                    .get_or_insert_with(|| engine.lineages_of(state))
-                    .contains(&lineage)
+        engine.published_after(state, &rows, table, &before, ids, lost, next_id, &waiting)
+    }
+
+    /// `process_and_advance` of `state` and `book` over `measurements`, then `publish`
+    /// of the state after the scan, in one call (`WorldModel._ingest_scan`):
+    /// `(after, book, current, unchanged)`, `after` the `CoreState` that `make_state`
+    /// makes of the core's state after the scan.
+    #[pyo3(signature = (state, book, measurements, published, ids, lost, next_id, waiting, make_state))]
+    #[allow(clippy::too_many_arguments)]
+    fn process_and_publish<'py>(
+        slf: &Bound<'py, Self>,
+        state: &PyState,
+        book: &PyBook,
+        measurements: &Bound<'py, PyAny>,
+        published: &Bound<'py, PyAny>,
+        ids: &Bound<'py, PyDict>,
+        lost: bool,
+        next_id: i64,
+        waiting: Vec<(i64, u64)>,
+        make_state: &Bound<'py, PyAny>,
+    ) -> PyResult<ScanPublished<'py>> {
+        let py = slf.py();
+        let engine = slf.get();
+        let scan = scan_rows(slf, measurements)?;
+        let detectors: Vec<usize> = scan.iter().map(|m| m.detector).collect();
+        let table = id_table(ids)?;
+        let before: KeySet<u64> = published_lineages(published)?.into_iter().collect();
+        let filter = engine.filter.clone();
+        let summaries = engine.summaries.clone();
+        let (held, held_book) = (state.state.clone(), book.book.clone());
+        let (after, after_book, rows) = run(py, "Engine.process_and_publish", || {
+            let after = filter.process_scan(&held, &scan, None)?;
+            let book = crate::confidence::advance(
+                &held_book,
+                &after,
+                &detectors,
+                None,
+                None,
+                &filter.tables,
+            )?;
+            let rows = shown_rows(&after, &filter, &summaries, &before, &table);
+            Ok((after, book, rows))
+        })?;
+        let after = Bound::new(
+            py,
+            PyState {
+                state: Arc::new(after),
+            },
+        )?;
+        let after = make_state.call1((after,))?;
+        let (current, unchanged) =
+            engine.published_after(&after, &rows, table, &before, ids, lost, next_id, &waiting)?;
+        let book = PyBook {
+            book: Arc::new(after_book),
         };
-        let still_waiting = || {
-            rows.iter().all(|&(lineage, ..)| {
-                table.get(&lineage).is_some_and(|id| {
-                    waiting
-                        .iter()
-                        .all(|&(lost_id, lost_lineage)| lost_id != *id && lost_lineage != lineage)
-                })
-            })
-        };
-        let left = lost
-            || table
-                .iter()
-                .any(|(&lineage, &id)| !showing.contains(&lineage) && !unshown_waits(lineage, id))
-            || before.iter().any(|lineage| !showing.contains(lineage))
-            || (!waiting.is_empty() && !still_waiting());
-        if left {
-            return Ok((Some(engine.current_refs(state, &rows)?), None));
-        }
-        let (mut table, mut next_id) = (table, next_id);
-        let mut copied: Option<Bound<'py, PyDict>> = None;
-        for &(lineage, ..) in &rows {
-            if table.contains_key(&lineage) {
-                continue;
-            }
-            // a new table: one a query cached must not change
-            let fresh = match &copied {
-                Some(dict) => dict,
-                None => copied.insert(ids.copy()?),
-            };
-            fresh.set_item(lineage, next_id)?;
-            table.insert(lineage, next_id);
-            next_id += 1;
-        }
-        let shown = rows
-            .iter()
-            .map(|&(lineage, key, cls, serial)| Row {
-                id: table[&lineage],
-                lineage,
-                key,
-                serial,
-                cls,
-            })
-            .collect();
-        let names = engine.names.iter().map(|name| name.clone_ref(py)).collect();
-        let shown = Bound::new(py, PyPublished::new(shown, names, state.clone().unbind()))?;
-        Ok((
-            None,
-            Some((copied.unwrap_or_else(|| ids.clone()), shown, next_id)),
-        ))
+        Ok((after, book, current, unchanged))
     }
 
     /// The confidence book after one scan (`semwm.confidence.advance`; `state` is the
