@@ -5,11 +5,15 @@
 //! `x` `M x n` mode-matched means, `p` `M x n x n` covariances, `mu` `M` mode
 //! probabilities; `z` `d`, `r` `d x d`. The measurement matrix is `H = [I_d 0]`.
 //!
+//! Each kernel's body is generic over the object's [`Shape`] (`crate::filters::shape`):
+//! the public function takes the sizes at run time and calls the body for its shape.
+//!
 //! IMM convention: `T[i, j] = P(mode j at k | mode i at k-1)`, rows sum to 1.
 //! References: Bar-Shalom, Li, Kirubarajan, *Estimation with Applications to Tracking
 //! and Navigation*, Section 11.6.6 (IMM).
 
 use crate::error::KernelResult;
+use crate::filters::shape::{with_shape, with_state, Shape};
 use crate::filters::small::{inverse_and_log_det, quadratic_form, MAX_STATE};
 
 const LOG_2PI: f64 = 1.8378770664093453; // log(2 pi)
@@ -17,6 +21,7 @@ const LOG_2PI: f64 = 1.8378770664093453; // log(2 pi)
 pub const MAX_MODES: usize = 8;
 
 /// `out = a b` for `n x n` row-major matrices.
+#[inline(always)]
 fn matmul(a: &[f64], b: &[f64], n: usize, out: &mut [f64]) {
     for i in 0..n {
         for j in 0..n {
@@ -30,6 +35,7 @@ fn matmul(a: &[f64], b: &[f64], n: usize, out: &mut [f64]) {
 }
 
 /// `out = a b^T` for `n x n` row-major matrices.
+#[inline(always)]
 fn matmul_transposed(a: &[f64], b: &[f64], n: usize, out: &mut [f64]) {
     for i in 0..n {
         for j in 0..n {
@@ -69,6 +75,23 @@ pub fn imm_mix(
         cbar.copy_from_slice(mu);
         return;
     }
+    with_state!(n, |shape| mix_in(shape, x, p, mu, t, m, x0, p0, cbar))
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn mix_in<S: Shape>(
+    shape: S,
+    x: &[f64],
+    p: &[f64],
+    mu: &[f64],
+    t: &[f64],
+    m: usize,
+    x0: &mut [f64],
+    p0: &mut [f64],
+    cbar: &mut [f64],
+) {
+    let n = shape.n();
     for j in 0..m {
         cbar[j] = (0..m).map(|i| mu[i] * t[i * m + j]).sum();
     }
@@ -108,6 +131,12 @@ pub fn imm_mix(
 /// mixing): `x-_j = F_j x0_j`, `P-_j = F_j P0_j F_j^T + Q_j`. `f` and `q` are
 /// `M x n x n`; results overwrite `x0` and `p0`.
 pub fn predict_modes(x0: &mut [f64], p0: &mut [f64], f: &[f64], q: &[f64], m: usize, n: usize) {
+    with_state!(n, |shape| predict_in(shape, x0, p0, f, q, m))
+}
+
+#[inline(always)]
+fn predict_in<S: Shape>(shape: S, x0: &mut [f64], p0: &mut [f64], f: &[f64], q: &[f64], m: usize) {
+    let n = shape.n();
     let nn = n * n;
     let mut fp = [0.0; MAX_STATE * MAX_STATE];
     let mut mean = [0.0; MAX_STATE];
@@ -149,6 +178,20 @@ pub fn update(
     n: usize,
     d: usize,
 ) -> KernelResult<f64> {
+    with_shape!(n, d, |shape| update_in(shape, x, p, mu, z, r, m))
+}
+
+#[inline(always)]
+fn update_in<S: Shape>(
+    shape: S,
+    x: &mut [f64],
+    p: &mut [f64],
+    mu: &mut [f64],
+    z: &[f64],
+    r: &[f64],
+    m: usize,
+) -> KernelResult<f64> {
+    let (n, d) = (shape.n(), shape.d());
     let nn = n * n;
     let mut log_lam = [0.0; MAX_MODES];
     let mut y = [0.0; 3];
@@ -238,6 +281,20 @@ pub fn combine(
         p_hat.copy_from_slice(&p[..nn]);
         return;
     }
+    with_state!(n, |shape| combine_in(shape, x, p, mu, m, x_hat, p_hat))
+}
+
+#[inline(always)]
+fn combine_in<S: Shape>(
+    shape: S,
+    x: &[f64],
+    p: &[f64],
+    mu: &[f64],
+    m: usize,
+    x_hat: &mut [f64],
+    p_hat: &mut [f64],
+) {
+    let n = shape.n();
     for a in 0..n {
         x_hat[a] = (0..m).map(|j| mu[j] * x[j * n + a]).sum();
     }
@@ -250,7 +307,7 @@ pub fn combine(
 
 /// Entry `(a, b)` of [`combine`]'s `P^` (`x_hat` the combined mean).
 #[allow(clippy::too_many_arguments)]
-#[inline]
+#[inline(always)]
 fn combined_entry(
     x: &[f64],
     p: &[f64],
@@ -286,6 +343,22 @@ pub fn combine_position(
         }
         return;
     }
+    with_shape!(n, d, |shape| {
+        combine_position_in(shape, x, p, mu, m, x_hat, p_block)
+    })
+}
+
+#[inline(always)]
+fn combine_position_in<S: Shape>(
+    shape: S,
+    x: &[f64],
+    p: &[f64],
+    mu: &[f64],
+    m: usize,
+    x_hat: &mut [f64],
+    p_block: &mut [f64],
+) {
+    let (n, d) = (shape.n(), shape.d());
     for a in 0..n {
         x_hat[a] = (0..m).map(|j| mu[j] * x[j * n + a]).sum();
     }
@@ -299,6 +372,103 @@ pub fn combine_position(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::filters::shape::{Fixed, Runtime};
+
+    /// Arbitrary values, and a covariance that is positive definite (`A A^T + I`).
+    fn value(k: usize) -> f64 {
+        ((k * 7919 % 1009) as f64 - 500.0) / 97.0
+    }
+
+    fn covariance(n: usize, seed: usize) -> Vec<f64> {
+        let a: Vec<f64> = (0..n * n).map(|k| value(k + seed) / 5.0).collect();
+        let mut c = vec![0.0; n * n];
+        for i in 0..n {
+            for j in 0..n {
+                c[i * n + j] = (0..n).map(|k| a[i * n + k] * a[j * n + k]).sum::<f64>()
+                    + if i == j { 1.0 } else { 0.0 };
+            }
+        }
+        c
+    }
+
+    fn bits(values: &[f64]) -> Vec<u64> {
+        values.iter().map(|v| v.to_bits()).collect()
+    }
+
+    /// Every kernel with the shape fixed at compile time and with it at run time: the
+    /// same bits (the module `shape`'s promise), for each shape the factory makes.
+    fn fixed_equals_runtime<const N: usize, const D: usize>(m: usize) {
+        let (n, d, nn) = (N, D, N * N);
+        let x: Vec<f64> = (0..m * n).map(value).collect();
+        let p: Vec<f64> = (0..m).flat_map(|j| covariance(n, 3 * j + 1)).collect();
+        let total: f64 = (0..m).map(|j| 1.0 + j as f64).sum();
+        let mu: Vec<f64> = (0..m).map(|j| (1.0 + j as f64) / total).collect();
+        let t: Vec<f64> = (0..m * m)
+            .map(|k| {
+                if k / m == k % m {
+                    0.9
+                } else {
+                    0.1 / (m.max(2) - 1) as f64
+                }
+            })
+            .collect();
+        let f: Vec<f64> = (0..m * nn).map(|k| value(k + 17) / 50.0).collect();
+        let q: Vec<f64> = (0..m).flat_map(|j| covariance(n, 5 * j + 2)).collect();
+        let z: Vec<f64> = (0..d).map(|k| value(k + 40)).collect();
+        let r = covariance(d, 9);
+        let (fixed, runtime) = (Fixed::<N, D>, Runtime { n, d });
+
+        let (mut x0a, mut p0a, mut ca) = (vec![0.0; m * n], vec![0.0; m * nn], vec![0.0; m]);
+        let (mut x0b, mut p0b, mut cb) = (x0a.clone(), p0a.clone(), ca.clone());
+        mix_in(fixed, &x, &p, &mu, &t, m, &mut x0a, &mut p0a, &mut ca);
+        mix_in(runtime, &x, &p, &mu, &t, m, &mut x0b, &mut p0b, &mut cb);
+        assert_eq!(
+            (bits(&x0a), bits(&p0a), bits(&ca)),
+            (bits(&x0b), bits(&p0b), bits(&cb))
+        );
+
+        let (mut xa, mut pa, mut xb, mut pb) = (x.clone(), p.clone(), x.clone(), p.clone());
+        predict_in(fixed, &mut xa, &mut pa, &f, &q, m);
+        predict_in(runtime, &mut xb, &mut pb, &f, &q, m);
+        assert_eq!((bits(&xa), bits(&pa)), (bits(&xb), bits(&pb)));
+
+        if d > 0 {
+            let (mut xa, mut pa, mut mua) = (x.clone(), p.clone(), mu.clone());
+            let (mut xb, mut pb, mut mub) = (x.clone(), p.clone(), mu.clone());
+            let la = update_in(fixed, &mut xa, &mut pa, &mut mua, &z, &r, m).unwrap();
+            let lb = update_in(runtime, &mut xb, &mut pb, &mut mub, &z, &r, m).unwrap();
+            assert_eq!(la.to_bits(), lb.to_bits());
+            assert_eq!(
+                (bits(&xa), bits(&pa), bits(&mua)),
+                (bits(&xb), bits(&pb), bits(&mub))
+            );
+
+            let (mut ma, mut ba) = (vec![0.0; n], vec![0.0; d * d]);
+            let (mut mb, mut bb) = (vec![0.0; n], vec![0.0; d * d]);
+            combine_position_in(fixed, &x, &p, &mu, m, &mut ma, &mut ba);
+            combine_position_in(runtime, &x, &p, &mu, m, &mut mb, &mut bb);
+            assert_eq!((bits(&ma), bits(&ba)), (bits(&mb), bits(&bb)));
+        }
+
+        let (mut ma, mut fa) = (vec![0.0; n], vec![0.0; nn]);
+        let (mut mb, mut fb) = (vec![0.0; n], vec![0.0; nn]);
+        combine_in(fixed, &x, &p, &mu, m, &mut ma, &mut fa);
+        combine_in(runtime, &x, &p, &mu, m, &mut mb, &mut fb);
+        assert_eq!((bits(&ma), bits(&fa)), (bits(&mb), bits(&fb)));
+    }
+
+    #[test]
+    fn kernels_of_a_fixed_shape_give_the_runtime_shapes_bits() {
+        for m in [1, 2, 3] {
+            fixed_equals_runtime::<1, 1>(m);
+            fixed_equals_runtime::<2, 1>(m);
+            fixed_equals_runtime::<2, 2>(m);
+            fixed_equals_runtime::<4, 2>(m);
+            fixed_equals_runtime::<3, 3>(m);
+            fixed_equals_runtime::<6, 3>(m);
+            fixed_equals_runtime::<4, 0>(m);
+        }
+    }
 
     #[test]
     fn combine_position_gives_combines_leading_block_bit_for_bit() {

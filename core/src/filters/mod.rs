@@ -3,4 +3,5 @@
 pub mod batched;
 pub mod factory;
 pub mod motion;
+pub mod shape;
 pub mod small;

@@ -16,6 +16,7 @@ use crate::error::{KernelError, KernelResult};
 ///
 /// Mirrors `semwm.filters.small.inverse_and_log_det` for one matrix. Errors with
 /// `NotPositiveDefinite` when `S` is not.
+#[inline]
 pub fn inverse_and_log_det(s: &[f64], d: usize, inverse: &mut [f64]) -> KernelResult<f64> {
     if d == 2 {
         let (a, b, c) = (s[0], s[1], s[3]);
@@ -178,6 +179,7 @@ pub fn lu_inverse(a: &[f64], d: usize, inverse: &mut [f64]) -> KernelResult<()> 
 }
 
 /// `r^T C^-1 r` given the inverse `C^-1` (`quadratic_form` in the Python module).
+#[inline]
 pub fn quadratic_form(residual: &[f64], inverse: &[f64], d: usize) -> f64 {
     let mut total = 0.0;
     for i in 0..d {
