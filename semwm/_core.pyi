@@ -251,6 +251,7 @@ class Engine:
             tuple[tuple[float, ...], ...],
             tuple[float, ...] | None,
             list[float],
+            tuple[str, str | None, float, float, list[float]],
         ]
     ]: ...
     def publish(

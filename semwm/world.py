@@ -77,6 +77,7 @@ from semwm.world_types import (
     HypothesisSummary,
     WorldObject,
     WorldState,
+    made_without_init,
 )
 
 if TYPE_CHECKING:
@@ -127,19 +128,12 @@ def _ingest_result(
     applied: int, time: float | None, ignored: tuple[IgnoredDetection, ...]
 ) -> IngestResult:
     """``IngestResult(applied, time, len(ignored), ignored)``, made without the frozen
-    dataclass's ``__init__`` (a guarded ``object.__setattr__`` per field, about 0.4 µs):
-    one is made per ingested batch, and the Rust engine's scan of one detection takes a
-    few µs. The same value, equal to and as frozen as one made by the constructor."""
-    result = _new_object(IngestResult)
-    fields = result.__dict__
-    fields["applied"] = applied
-    fields["time"] = time
-    fields["ignored"] = len(ignored)
-    fields["ignored_detections"] = ignored
-    return result
-
-
-_new_object = object.__new__
+    dataclass's ``__init__`` (:func:`~semwm.world_types.made_without_init`): one is made
+    per ingested batch, and the Rust engine's scan of one detection takes a few µs."""
+    return made_without_init(
+        IngestResult,
+        {"applied": applied, "time": time, "ignored": len(ignored), "ignored_detections": ignored},
+    )
 
 
 class _Marginal(NamedTuple):
@@ -152,6 +146,20 @@ class _Marginal(NamedTuple):
     existence: float
     track: Track
     row: int
+
+
+class _ShownVersion(NamedTuple):
+    """What :meth:`WorldModel.world` shows of a version held in the Rust engine's core
+    besides its prediction (the last item of ``Engine.world_at``'s rows), read there so
+    that a query makes no :class:`Track` (numpy arrays) of the version: a query follows
+    almost every scan, and each scan makes new versions."""
+
+    lineage: int
+    cls: str
+    label: str | None
+    last_seen: float
+    created: float
+    class_probs: Sequence[float]
 
 
 class _LoggedScan(NamedTuple):
@@ -1766,14 +1774,13 @@ class WorldModel:
         core = self._mhf._core
         assert core is not None and isinstance(self._state, CoreState)
         rows = core.engine.world_at(state, self._state, at, self._published, self._ids)
-        rows = [row for row in rows if row[1] >= floor]
-        tracks = core.tracks_of_serials(state, [row[2] for row in rows], [row[3] for row in rows])
         covered = self.taxonomy.covers(cls) if cls is not None else None
         dim = self._knowledge.world.dimension
         objects = []
-        for (_, existence, _, _, position, covariance, velocity, mu), track in zip(
-            rows, tracks, strict=True
-        ):
+        for lineage, existence, _, _, position, covariance, velocity, mu, shown in rows:
+            if not existence >= floor:
+                continue
+            track = _ShownVersion(lineage, *shown)
             if track.created > at + 1e-9:
                 continue
             if covered is not None and track.cls not in covered:
@@ -1820,7 +1827,7 @@ class WorldModel:
 
     def _world_object(
         self,
-        track: Track,
+        track: Track | _ShownVersion,
         existence: float,
         at: float,
         position: tuple[tuple[float, ...], tuple[tuple[float, ...], ...]],
@@ -1844,27 +1851,31 @@ class WorldModel:
             # Queries change nothing, so a replay of the same detections publishes the
             # same ids.
             object_id = TENTATIVE_IDS + 1 + track.lineage
-        return WorldObject(
-            id=object_id,
-            cls=track.cls,
-            label=track.label,
-            position=position[0],
-            velocity=velocity,
-            covariance=position[1],
-            existence=min(1.0, existence),
-            last_seen=track.last_seen,
-            created=track.created,
-            mode_probabilities=modes,
-            class_probabilities=(
-                self._mhf.associator.class_model.as_dict(track.class_probs)
-                if self._mhf.mht
-                else None
-            ),
-            confidence=self.confidence_of(track, at, book) if self._mhf.mht else None,
-            tentative=tentative,
+        mht = self._mhf.mht
+        return made_without_init(  # WorldObject(...), one per object of every query
+            WorldObject,
+            {
+                "id": object_id,
+                "cls": track.cls,
+                "label": track.label,
+                "position": position[0],
+                "velocity": velocity,
+                "covariance": position[1],
+                "existence": min(1.0, existence),
+                "last_seen": track.last_seen,
+                "created": track.created,
+                "mode_probabilities": modes,
+                "class_probabilities": (
+                    self._mhf.associator.class_model.as_dict(track.class_probs) if mht else None
+                ),
+                "confidence": self.confidence_of(track, at, book) if mht else None,
+                "tentative": tentative,
+            },
         )
 
-    def confidence_of(self, track: Track, time: float, book: BookView | None = None) -> Confidence:
+    def confidence_of(
+        self, track: Track | _ShownVersion, time: float, book: BookView | None = None
+    ) -> Confidence:
         """An object's confidence (paper 004) at ``time``: :mod:`semwm.confidence`."""
         spec = self._knowledge.classes[track.cls]
         value = (self._book if book is None else book).at(track.lineage, time, spec)

@@ -3,12 +3,29 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 from semwm.confidence import Confidence
 
 TENTATIVE_IDS = 1_000_000_000
 """Ids of tentative objects (below the publishing threshold) start above this: one
 plus the number of the detection that started the object, added to it."""
+
+_Value = TypeVar("_Value")
+
+
+def made_without_init(cls: type[_Value], fields: dict[str, Any]) -> _Value:
+    """A value of the frozen dataclass ``cls`` with ``fields`` (every field, by name),
+    made without its ``__init__``, which sets each field through a guarded
+    ``object.__setattr__`` (a :class:`WorldObject`: 1.2 µs; this: 0.4 µs). For the
+    values made per object of a query or per scan; equal to, and as frozen as, the
+    constructor's (tests hold each use to the constructor)."""
+    value = _new_object(cls)
+    value.__dict__.update(fields)
+    return value
+
+
+_new_object = object.__new__
 
 
 @dataclass(frozen=True)

@@ -130,10 +130,13 @@ class ClassModel:
             chosen[none] = np.argmax(probabilities[none], axis=1)
         return chosen
 
-    def as_dict(self, probabilities: FloatArray, floor: float = 1e-3) -> dict[str, float]:
+    def as_dict(
+        self, probabilities: FloatArray | Sequence[float], floor: float = 1e-3
+    ) -> dict[str, float]:
         """The distribution as ``{class: probability}``, classes below ``floor`` left out."""
         names = self.names
-        return {names[i]: p for i, p in enumerate(probabilities.tolist()) if p >= floor}
+        values = probabilities.tolist() if isinstance(probabilities, np.ndarray) else probabilities
+        return {names[i]: p for i, p in enumerate(values) if p >= floor}
 
     def point(self, name: str) -> FloatArray:
         """A distribution sitting on one class."""

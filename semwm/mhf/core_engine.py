@@ -498,12 +498,6 @@ class CoreEngine:
         """The versions of ``keys`` in ``state`` as Python values."""
         return self._made_tracks(state.core, keys, state.core.serials(keys))
 
-    def tracks_of_serials(
-        self, state: CoreState, keys: list[int], serials: list[int]
-    ) -> list[Track]:
-        """:meth:`tracks_of` where the versions' serial numbers are known."""
-        return self._made_tracks(state.core, keys, serials)
-
     def _made_tracks(self, core: _core.State, keys: list[int], serials: list[int]) -> list[Track]:
         made = self._made.tracks
         missing = [k for k, serial in zip(keys, serials, strict=True) if serial not in made]

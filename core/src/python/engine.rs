@@ -285,6 +285,17 @@ type WorldRow<'py> = (
     Bound<'py, PyTuple>,
     Option<Bound<'py, PyTuple>>,
     Vec<f64>,
+    ShownVersion<'py>,
+);
+
+/// What `WorldModel.world` shows of an object's version besides its prediction:
+/// `(class, label, last_seen, created, class_probabilities)`.
+type ShownVersion<'py> = (
+    Bound<'py, PyString>,
+    Option<Bound<'py, PyString>>,
+    f64,
+    f64,
+    Vec<f64>,
 );
 
 /// A version of a core state, named without making its Python value
@@ -762,8 +773,10 @@ impl PyEngine {
     /// The world of `state` (a `CoreState`) predicted to `at` (`WorldModel.world`'s
     /// `_marginals` and `_same_objects`, `mht`; `crate::world::at`): one row per
     /// physical object, `(lineage, existence, key, serial, position, covariance,
-    /// velocity, mode_probabilities)` in the specification's order, the position and
-    /// its covariance as tuples (`velocity` `None` for a filter without one). `latest`
+    /// velocity, mode_probabilities, shown)` in the specification's order, the position
+    /// and its covariance as tuples (`velocity` `None` for a filter without one), `shown`
+    /// the version's `(class, label, last_seen, created, class_probabilities)` (so that
+    /// a query makes no `Track` of the version). `latest`
     /// is the model's latest state (a `CoreState`: its most probable hypothesis decides
     /// which lineages are distinct), `published` the objects shown now and `ids` their
     /// ids, as `Engine.current` takes them.
@@ -796,24 +809,42 @@ impl PyEngine {
             Ok(marginals
                 .into_iter()
                 .map(|(m, row)| {
-                    let serial = held.tracks[&m.key].serial;
+                    let entry = &held.tracks[&m.key];
                     let predicted_row = &predicted.rows[row];
                     let mean = &predicted_row.mean;
                     let velocity =
                         (mean.len() > d).then(|| mean[d..(2 * d).min(mean.len())].to_vec());
                     (
-                        (m.lineage, m.existence, m.key, serial),
+                        (m.lineage, m.existence, m.key, entry.serial),
                         predicted.position(row).to_vec(),
                         predicted.covariance(row).to_vec(),
                         velocity,
                         predicted_row.mu().to_vec(),
+                        entry.version.clone(),
                     )
                 })
                 .collect::<Vec<_>>())
         })?;
         rows.into_iter()
             .map(
-                |((lineage, existence, key, serial), position, covariance, velocity, mu)| {
+                |(
+                    (lineage, existence, key, serial),
+                    position,
+                    covariance,
+                    velocity,
+                    mu,
+                    version,
+                )| {
+                    let shown = (
+                        self.names[version.cls].bind(py).clone(),
+                        version
+                            .label
+                            .as_deref()
+                            .map(|label| PyString::new(py, label)),
+                        version.last_seen,
+                        version.created,
+                        version.class_probs.to_vec(),
+                    );
                     let covariance = PyTuple::new(
                         py,
                         covariance
@@ -831,6 +862,7 @@ impl PyEngine {
                         covariance,
                         velocity,
                         mu,
+                        shown,
                     ))
                 },
             )

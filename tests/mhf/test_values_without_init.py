@@ -1,6 +1,7 @@
-"""The Rust engine's path for a batch read as one scan (``WorldModel._ingest_scan``)
-makes its ``IngestResult`` without the frozen dataclass's constructor
-(``_ingest_result``): it must give the value the general path gives, as frozen."""
+"""Values made per scan or per object of a query without their frozen dataclass's
+constructor (``semwm.world_types.made_without_init``): the Rust engine's path for a
+batch read as one scan makes its ``IngestResult`` so, and every query its
+``WorldObject``s. Each must be the value the constructor makes, as frozen."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import pytest
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.world import IngestResult, WorldModel
+from semwm.world_types import WorldObject
 
 
 def _batches() -> list[list[dict[str, Any]]]:
@@ -57,3 +59,36 @@ def test_the_scans_path_gives_the_general_paths_result(monkeypatch: pytest.Monke
         with pytest.raises(dataclasses.FrozenInstanceError):
             got.applied = 0  # type: ignore[misc]
     assert ignored_somewhere
+
+
+@pytest.mark.parametrize("engine", ["rust", "python"])
+def test_world_objects_are_the_constructors_values(engine: str) -> None:
+    model = WorldModel(load_knowledge(shipped_knowledge_path("sim2.yaml")), engine=engine)
+    for batch in _batches():
+        model.ingest(batch)
+    names = {field.name for field in dataclasses.fields(WorldObject)}
+    seen = 0
+    for min_existence in (None, 1e-6):  # published objects, and tentative ones
+        for got in model.world(time=0.4, min_existence=min_existence).objects:
+            assert set(vars(got)) == names
+            expected = WorldObject(**{name: getattr(got, name) for name in names})
+            assert got == expected
+            assert repr(got) == repr(expected)
+            assert got.to_dict() == expected.to_dict()
+            with pytest.raises(dataclasses.FrozenInstanceError):
+                got.existence = 0.0  # type: ignore[misc]
+            seen += 1
+    assert seen >= 2
+
+
+def test_a_query_of_the_rust_engine_makes_no_track() -> None:
+    """``Engine.world_at``'s rows carry what a query shows of each version: the world
+    is read without a ``Track`` (numpy arrays) of each version."""
+    model = WorldModel(load_knowledge(shipped_knowledge_path("sim2.yaml")), engine="rust")
+    for batch in _batches():
+        model.ingest(batch)
+    core = model._mhf._core
+    assert core is not None
+    made = dict(core._made.tracks)
+    objects = model.world(time=0.5, min_existence=1e-6).objects
+    assert objects and core._made.tracks == made
