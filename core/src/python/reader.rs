@@ -19,12 +19,14 @@
 //! reader was made for, its `Measurement` values made only if Python reads them.
 
 use std::collections::HashMap;
+use std::hash::BuildHasherDefault;
 use std::sync::Arc;
 
 use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyFloat, PyList, PyString, PyTuple, PyType};
 
+use crate::mhf::hypotheses::KeyHasher;
 use crate::mhf::measurement::{within_bounds, within_reach_or_margin, Measurement};
 use crate::mhf::rates::Name;
 use crate::python::scan::{Given, Makers, PyScan};
@@ -378,7 +380,10 @@ impl PyDetectionReader {
     ) -> PyResult<Option<(usize, Bound<'py, PyDict>, Vec<usize>)>> {
         let mut building: Vec<Building<'py>> = Vec::new();
         // scan keys (time with -0.0 as 0.0, as a dict's keys compare; source) -> index
-        let mut index: HashMap<(u64, Name), usize> = HashMap::new();
+        // (KeyHasher: a batch is mostly one scan, and SipHash cost about 200 instructions
+        // a detection)
+        let mut index: HashMap<(u64, Name), usize, BuildHasherDefault<KeyHasher>> =
+            HashMap::default();
         // the scan of the previous detection: a batch's detections come in runs
         let mut current: Option<(f64, Name, usize)> = None;
         let mut last_source: Option<Name> = None;
