@@ -145,10 +145,14 @@ pub struct PyDetectionReader {
     max_time: f64,
     max_time_std: f64,
     default_detector: Py<PyString>,
-    /// class -> detector -> what the pair gives.
-    pairs: HashMap<String, HashMap<String, Pair>>,
+    /// class -> detector -> what the pair gives (KeyHasher: two lookups a detection).
+    pairs: Pairs,
     zero: Py<PyAny>,
 }
+
+/// class -> detector -> [`Pair`].
+type Pairs = HashMap<String, HashMap<String, Pair, KeyHashing>, KeyHashing>;
+type KeyHashing = BuildHasherDefault<KeyHasher>;
 
 impl PyDetectionReader {
     /// One detection read, or `None` when it is not plain. `last_source`: the previous
@@ -323,7 +327,7 @@ impl PyDetectionReader {
             usize,
             Option<f64>,
         );
-        let mut table: HashMap<String, HashMap<String, Pair>> = HashMap::new();
+        let mut table = Pairs::default();
         for (key, value) in pairs.iter() {
             let (cls, detector): (String, String) = key.extract()?;
             let (r, trust_labels, clutter_rate, reach, bounds, cls_index, detector_index, gate): PairValues =
@@ -382,8 +386,7 @@ impl PyDetectionReader {
         // scan keys (time with -0.0 as 0.0, as a dict's keys compare; source) -> index
         // (KeyHasher: a batch is mostly one scan, and SipHash cost about 200 instructions
         // a detection)
-        let mut index: HashMap<(u64, Name), usize, BuildHasherDefault<KeyHasher>> =
-            HashMap::default();
+        let mut index: HashMap<(u64, Name), usize, KeyHashing> = HashMap::default();
         // the scan of the previous detection: a batch's detections come in runs
         let mut current: Option<(f64, Name, usize)> = None;
         let mut last_source: Option<Name> = None;
