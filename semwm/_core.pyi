@@ -234,6 +234,7 @@ class Engine:
     def current(
         self, state: Any, published: Mapping[int, Any], ids: Mapping[int, int]
     ) -> dict[int, VersionRef]: ...
+    def may_return(self, state: State, key: int, cls: str) -> bool: ...
     def world_at(
         self,
         state: Any,

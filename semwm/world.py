@@ -1337,11 +1337,16 @@ class WorldModel:
     def _may_return(self, pub: _Lost) -> bool:
         """Whether a lost object may come back under its id (``mht``): not when it was
         lost out of the region or next to a target it leaves by (a disappearance
-        relation: it left, and someone coming in there is someone else)."""
+        relation: it left, and someone coming in there is someone else). The Rust
+        engine's versions are tested in the core (``Engine.may_return``, the same rule:
+        ``crate::world::may_return``)."""
         spec = self._knowledge.classes.get(pub.track.cls)
         if spec is None:
             return False
-        track = track_of(pub.track)
+        core, version = self._mhf._core, pub.track
+        if core is not None and not isinstance(version, Track):  # a version in the core
+            return core.engine.may_return(version.state.core, version.key, version.cls)
+        track = track_of(version)
         x, P = _summary_position(track, self._knowledge.world.dimension)
         region = self._knowledge.world.region
         margin = self._mhf.region_margins([track])

@@ -21,7 +21,7 @@ use crate::mhf::filter::Filter;
 use crate::mhf::hypotheses::{fsum, KeyMap, KeySet, TIE};
 use crate::mhf::predict::{predict, Predicted};
 use crate::mhf::state::{Key, State, Version};
-use crate::mhf::tables::Tables;
+use crate::mhf::tables::{ClassId, Tables};
 
 /// 4 x the Bhattacharyya distance under which two lineages' estimates coincide.
 pub const SAME_OBJECT_GATE: f64 = 1.0;
@@ -45,6 +45,12 @@ pub type Summaries = KeyMap<u64, Arc<Summary>>;
 
 /// `_stored_summaries` of one version.
 pub fn summary(version: &Version, tables: &Tables) -> Summary {
+    summary_as(version, version.cls, tables)
+}
+
+/// [`summary`] of a version with the region margins of class `cls` (a version of
+/// another knowledge's state names its class by another index).
+fn summary_as(version: &Version, cls: ClassId, tables: &Tables) -> Summary {
     let d = tables.dim;
     let s = &version.state;
     let (m, n) = (s.modes, s.size);
@@ -80,7 +86,7 @@ pub fn summary(version: &Version, tables: &Tables) -> Summary {
         Some(region) => {
             let low: Vec<f64> = region.iter().map(|(a, _)| *a).collect();
             let high: Vec<f64> = region.iter().map(|(_, b)| *b).collect();
-            let margin = &tables.classes[version.cls].region_margin;
+            let margin = &tables.classes[cls].region_margin;
             inside_probability(&position, &covariance, &low, &high, Some(margin))
         }
     };
@@ -89,6 +95,28 @@ pub fn summary(version: &Version, tables: &Tables) -> Summary {
         covariance,
         inside,
     }
+}
+
+/// `WorldModel._may_return`: whether an object lost from the published world (its
+/// version, of class `cls` of `tables`) may come back under its id: its stored position
+/// ([`summary`]) inside the region, widened by its class's margins, with probability at
+/// least 1/2, and not within reach of a target its class leaves by (a disappearance
+/// relation: someone coming in there is someone else).
+pub fn may_return(version: &Version, cls: ClassId, tables: &Tables) -> bool {
+    let summary = summary_as(version, cls, tables);
+    if summary.inside < 0.5 {
+        return false;
+    }
+    // `any` of the specification's `near <= max_distance` (a NaN distance is not near)
+    !tables.classes[cls].leave_relations.iter().any(|relation| {
+        let squared: f64 = summary
+            .position
+            .iter()
+            .zip(&relation.target)
+            .map(|(x, t)| (x - t) * (x - t))
+            .sum();
+        squared.sqrt() <= relation.max_distance
+    })
 }
 
 /// One object's marginal existence and the version shown for it (`_Marginal`).

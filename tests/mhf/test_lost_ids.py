@@ -112,3 +112,31 @@ def test_an_id_waits_id_memory_seconds(engine: Engine) -> None:
     assert before not in model._lost
     camera.scans(10.5, MIDDLE)
     assert _id_at(model, MIDDLE) != before
+
+
+def test_the_core_decides_whether_a_lost_object_may_return_as_the_specification() -> None:
+    """The Rust engine tests its lost versions in the core (``Engine.may_return``): the
+    same answer as the specification's test of the same version as a ``Track``, for
+    every object lost in the room, the door scenario and RoboCup, both answers met."""
+    from semwm.mhf.core_engine import track_of
+    from semwm.sim.runner import scans
+    from semwm.sim.scenarios import make_scenario
+
+    answers: list[tuple[bool, bool]] = []
+    for name, sizes in (("sim2", {}), ("door_exits", {}), ("robocup", {"duration": 4.0})):
+        for seed in (0, 1):
+            scenario = make_scenario(name, seed, **sizes)
+            knowledge = load_knowledge(shipped_knowledge_path(scenario.knowledge_file))
+            model = WorldModel(knowledge, engine="rust")
+            decide = model._may_return
+
+            def both(pub, decide=decide):  # type: ignore[no-untyped-def]
+                core_answer = decide(pub)
+                answers.append((core_answer, decide(pub._replace(track=track_of(pub.track)))))
+                return core_answer
+
+            model._may_return = both  # type: ignore[method-assign]
+            for scan in scans(scenario.detections):
+                model.ingest(scan)
+    assert answers and all(core == spec for core, spec in answers), answers
+    assert {core for core, _ in answers} == {True, False}

@@ -770,6 +770,24 @@ impl PyEngine {
         self.current_refs(state, &rows)
     }
 
+    /// `WorldModel._may_return` of version `key` of `state` (a `CoreState`'s core), an
+    /// object lost from the published world, of class `cls` (`crate::world::may_return`):
+    /// `False` for a class this knowledge does not have; a `ValueError` for a key the
+    /// state does not hold.
+    fn may_return(&self, state: &PyState, key: u64, cls: &str) -> PyResult<bool> {
+        let Some(&class) = self.classes.get(cls) else {
+            return Ok(false);
+        };
+        let entry = state.state.tracks.get(&key).ok_or_else(|| {
+            PyValueError::new_err(format!("object version {key} is not in the state"))
+        })?;
+        Ok(crate::world::may_return(
+            &entry.version,
+            class,
+            &self.filter.tables,
+        ))
+    }
+
     /// The world of `state` (a `CoreState`) predicted to `at` (`WorldModel.world`'s
     /// `_marginals` and `_same_objects`, `mht`; `crate::world::at`): one row per
     /// physical object, `(lineage, existence, key, serial, position, covariance,
