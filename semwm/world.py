@@ -396,6 +396,10 @@ class WorldModel:
         """Forget every detection and object."""
         self._state: StateView = MHFState.empty()
         self._book: BookView = ConfidenceBook()
+        core = self._mhf._core
+        if core is not None:  # the core's own empty state: the first scan is one call too
+            self._state = core.state_of(core.to_core(self._state))
+            self._book = CoreBook(core.core_book(self._book))
         self._summaries = {}
         self._log: list[_LoggedScan] = []
         self._replay_floor: _Floor | None = None  # no replay at or before this scan

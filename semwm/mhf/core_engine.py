@@ -421,7 +421,7 @@ class CoreEngine:
         call to the core (``WorldModel._step`` with the ``mht`` model)."""
         after, after_book = self.engine.process_and_advance(
             self.to_core(state),
-            self._core_book(book),
+            self.core_book(book),
             self.scan_rows(measurements),
             None if view is None else self._view(view),
             None if view is None else view.source,
@@ -521,7 +521,7 @@ class CoreEngine:
         view: SensorView | None,
     ) -> CoreBook:
         """:func:`semwm.confidence.advance` in the core."""
-        core_book = self._core_book(book)
+        core_book = self.core_book(book)
         detectors = [self.detectors[m.detector] for m in measurements]
         return CoreBook(
             self.engine.advance(
@@ -533,7 +533,7 @@ class CoreEngine:
             )
         )
 
-    def _core_book(self, book: BookView) -> _core.Book:
+    def core_book(self, book: BookView) -> _core.Book:
         """The core's confidence book of ``book``."""
         if isinstance(book, CoreBook):
             return book.core

@@ -13,6 +13,7 @@ import pytest
 from semwm.filters.engine import rust_core
 from semwm.mhf import core_engine
 from semwm.sim.scenarios import SCENARIOS
+from semwm.world import WorldModel
 
 BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
@@ -39,12 +40,20 @@ def test_a_run_in_step_is_equal_and_written() -> None:
     assert "Parity holds" in bench_engines.parity_markdown(doc)
 
 
+def _every_scan_through_scan_rows(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The Rust side's batches read by the specification (``_read_plain`` finds none
+    plain), so that each of its scans goes to the core through ``CoreEngine.scan_rows``
+    (the reader's scans go in one call, ``Engine.process_and_publish``)."""
+    monkeypatch.setattr(WorldModel, "_read_plain", lambda self, batch, sensor: None)
+
+
 def test_a_nudged_rust_engine_shows(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every measurement 1e-6 m off on the Rust side: the largest difference says so."""
 
     def nudged(self: Any, measurements: Any) -> Any:
         return [m._replace(z=m.z + 1e-6 * (np.arange(m.z.size) == 0)) for m in measurements]
 
+    _every_scan_through_scan_rows(monkeypatch)
     monkeypatch.setattr(core_engine.CoreEngine, "scan_rows", nudged)
     tally = bench_engines.parity_run(SIM1, 0)
     assert 1e-7 < tally.largest < 1e-5
@@ -54,6 +63,7 @@ def test_a_rust_engine_that_drops_a_detection_shows(monkeypatch: pytest.MonkeyPa
     def dropping(self: Any, measurements: Any) -> Any:
         return list(measurements)[:-1] or list(measurements)
 
+    _every_scan_through_scan_rows(monkeypatch)
     monkeypatch.setattr(core_engine.CoreEngine, "scan_rows", dropping)
     doc = bench_engines.run_parity(1, cases=(SIM1,), require_all=False)
     (row,) = doc["cases"]

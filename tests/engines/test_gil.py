@@ -59,7 +59,7 @@ def test_other_threads_run_while_the_core_scans(call: str) -> None:
         else:
             core.engine.process_and_publish(
                 state,
-                core._core_book(model._book),
+                core.core_book(model._book),
                 list(measurements),
                 {},
                 {},
