@@ -281,9 +281,22 @@ pub fn combine(
         p_hat.copy_from_slice(&p[..nn]);
         return;
     }
-    with_state!(n, |shape| combine_in(shape, x, p, mu, m, x_hat, p_hat))
+    with_state!(n, |shape| combine_in(
+        shape,
+        x,
+        p,
+        mu,
+        m,
+        shape.n(),
+        x_hat,
+        p_hat
+    ))
 }
 
+/// [`combine`]'s mean `x^` (`n`) and the leading `block x block` part of its `P^`
+/// (`block`: `n` for the whole, `d` for the position's covariance; a constant of the
+/// shape either way).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn combine_in<S: Shape>(
     shape: S,
@@ -291,16 +304,17 @@ fn combine_in<S: Shape>(
     p: &[f64],
     mu: &[f64],
     m: usize,
+    block: usize,
     x_hat: &mut [f64],
-    p_hat: &mut [f64],
+    p_out: &mut [f64],
 ) {
     let n = shape.n();
     for a in 0..n {
         x_hat[a] = (0..m).map(|j| mu[j] * x[j * n + a]).sum();
     }
-    for a in 0..n {
-        for b in 0..n {
-            p_hat[a * n + b] = combined_entry(x, p, mu, m, n, x_hat, a, b);
+    for a in 0..block {
+        for b in 0..block {
+            p_out[a * block + b] = combined_entry(x, p, mu, m, n, x_hat, a, b);
         }
     }
 }
@@ -344,29 +358,8 @@ pub fn combine_position(
         return;
     }
     with_shape!(n, d, |shape| {
-        combine_position_in(shape, x, p, mu, m, x_hat, p_block)
+        combine_in(shape, x, p, mu, m, shape.d(), x_hat, p_block)
     })
-}
-
-#[inline(always)]
-fn combine_position_in<S: Shape>(
-    shape: S,
-    x: &[f64],
-    p: &[f64],
-    mu: &[f64],
-    m: usize,
-    x_hat: &mut [f64],
-    p_block: &mut [f64],
-) {
-    let (n, d) = (shape.n(), shape.d());
-    for a in 0..n {
-        x_hat[a] = (0..m).map(|j| mu[j] * x[j * n + a]).sum();
-    }
-    for a in 0..d {
-        for b in 0..d {
-            p_block[a * d + b] = combined_entry(x, p, mu, m, n, x_hat, a, b);
-        }
-    }
 }
 
 #[cfg(test)]
@@ -445,15 +438,15 @@ mod tests {
 
             let (mut ma, mut ba) = (vec![0.0; n], vec![0.0; d * d]);
             let (mut mb, mut bb) = (vec![0.0; n], vec![0.0; d * d]);
-            combine_position_in(fixed, &x, &p, &mu, m, &mut ma, &mut ba);
-            combine_position_in(runtime, &x, &p, &mu, m, &mut mb, &mut bb);
+            combine_in(fixed, &x, &p, &mu, m, d, &mut ma, &mut ba);
+            combine_in(runtime, &x, &p, &mu, m, d, &mut mb, &mut bb);
             assert_eq!((bits(&ma), bits(&ba)), (bits(&mb), bits(&bb)));
         }
 
         let (mut ma, mut fa) = (vec![0.0; n], vec![0.0; nn]);
         let (mut mb, mut fb) = (vec![0.0; n], vec![0.0; nn]);
-        combine_in(fixed, &x, &p, &mu, m, &mut ma, &mut fa);
-        combine_in(runtime, &x, &p, &mu, m, &mut mb, &mut fb);
+        combine_in(fixed, &x, &p, &mu, m, n, &mut ma, &mut fa);
+        combine_in(runtime, &x, &p, &mu, m, n, &mut mb, &mut fb);
         assert_eq!((bits(&ma), bits(&fa)), (bits(&mb), bits(&fb)));
     }
 
