@@ -124,16 +124,9 @@ class IngestResult:
     ignored_detections: tuple[IgnoredDetection, ...] = ()
 
 
-def _ingest_result(
-    applied: int, time: float | None, ignored: tuple[IgnoredDetection, ...]
-) -> IngestResult:
-    """``IngestResult(applied, time, len(ignored), ignored)``, made without the frozen
-    dataclass's ``__init__`` (:func:`~semwm.world_types.made_without_init`): one is made
-    per ingested batch, and the Rust engine's scan of one detection takes a few µs."""
-    return made_without_init(
-        IngestResult,
-        {"applied": applied, "time": time, "ignored": len(ignored), "ignored_detections": ignored},
-    )
+_new_object = object.__new__
+"""How :func:`~semwm.world_types.made_without_init` makes a value; the one-scan path
+(:meth:`WorldModel._ingest_scan`) makes its ``IngestResult`` so, inlined."""
 
 
 class _Marginal(NamedTuple):
@@ -637,14 +630,18 @@ class WorldModel:
         every logged scan: what the general path does (its checks,
         :meth:`_process_scans`, :meth:`_publish`), with no call that case does not need.
         ``None`` (nothing done) when the batch is not that case, or the state not the
-        ``mht`` core's: the general path takes it."""
+        ``mht`` core's: the general path takes it.
+
+        The scan of one detection takes a few µs in the core, so this path is written
+        for the interpreter: no call, table or value it does not need (the model's
+        ``_commit`` and the result's making are inlined)."""
+        if read is None or len(read[1]) != 1:
+            return None
         core = self._mhf._core
         state, book = self._state, self._book
         if (
-            read is None
-            or len(read[1]) != 1
+            core is None
             or self._hold != 0
-            or core is None
             or not self._mhf.mht
             or type(state) is not CoreState
             or state.engine is not core
@@ -666,11 +663,13 @@ class WorldModel:
             if floor is not None and key <= floor[0]:
                 raise OutOfOrderError(time, latest, latest - floor[0][0], why=floor[1])
         newest, earliest = self._newest, self._earliest
-        self._newest = time if newest is None or time > newest else newest
-        self._earliest = time if earliest is None or time < earliest else earliest
+        if newest is None or time > newest:
+            self._newest = time
+        if earliest is None or time < earliest:
+            self._earliest = time
         # the scan, its confidences and its publishing (_publish_core) in one core call;
         # the state after it is at the scan's time
-        waiting = self._still_waiting(time)
+        waiting = self._still_waiting(time) if self._lost else ()
         after_state, after_book, shown, unchanged = core.engine.process_and_publish(
             state.core,
             book.core,
@@ -679,18 +678,28 @@ class WorldModel:
             self._ids,
             waiting is None,
             self._next_id,
-            waiting if waiting is not None else [],
+            () if waiting is None else waiting,
             core.state_of,
         )
+        # _commit, inlined
         if self.reorder_window > 0:
             kept = [*log, _LoggedScan(key, scan, state, None, book)]
-            log, floor = self._trimmed(kept, after_state)
-        else:  # nothing is kept for a replay
-            log, floor = [], self._replay_floor
-        self._commit(after_state, log, CoreBook(after_book), floor)
+            self._log, self._replay_floor = self._trimmed(kept, after_state)
+        elif log:
+            self._log = []
+        self._state, self._book = after_state, CoreBook(after_book)
         self._published_core(shown, unchanged)
         self._seq += size
-        return _ingest_result(applied, after_state.time, tuple(skipped))
+        result: IngestResult = _new_object(IngestResult)  # made_without_init
+        result.__dict__.update(
+            {
+                "applied": applied,
+                "time": after_state.time,
+                "ignored": len(skipped),
+                "ignored_detections": tuple(skipped),
+            }
+        )
+        return result
 
     def _read_plain(self, batch: list[DetectionInput], sensor: object) -> _Read | None:
         """The Rust engine's reading of a plain batch (``semwm._core.DetectionReader``):
@@ -705,7 +714,8 @@ class WorldModel:
             return None
         count, scans, unplaced = read
         if not unplaced:
-            return count, scans, []
+            # its list of the unplaced is empty, so a list of what is ignored too
+            return read  # type: ignore[return-value]
         skipped = None if sensor is not None else self._ignored_apart(batch, unplaced)
         return None if skipped is None else (count, scans, skipped)
 
