@@ -12,8 +12,9 @@
 /// The extension's Rust allocations (versions, hypotheses, key sets: many small ones
 /// per scan) go to mimalloc; Python's own memory is untouched.
 #[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+static ALLOCATOR: allocator::Mimalloc = allocator::Mimalloc;
 
+pub mod allocator;
 pub mod confidence;
 pub mod error;
 pub mod filters;
