@@ -3,13 +3,14 @@
 //! The `mimalloc` crate's allocator sends every request through `mi_malloc_aligned`,
 //! whatever the alignment. mimalloc 3 takes its plain path there only when the block
 //! happens to fall aligned; otherwise (a 48-byte request, say) it over-allocates through
-//! `mi_malloc_aligned_at_generic`. The scan makes some 190 small allocations, and that
-//! path was a fifth of the core's instructions (callgrind, the room's scans).
+//! `mi_malloc_aligned_at_generic`. The scan makes some 170 small allocations: through
+//! that path they took 16 % of the core's instructions in the room's scans, through
+//! this one 9 % (callgrind), and the scans 7 % fewer in all.
 //!
 //! Here a request whose alignment mimalloc's plain allocation already gives takes
 //! `mi_malloc`, `mi_zalloc` or `mi_realloc`; any other keeps the aligned functions. This
-//! is what Rust's own `System` allocator does with the C library's `malloc`, with the
-//! stricter condition mimalloc's size classes need (see [`plain`]).
+//! is what Rust's own `System` allocator does with the C library's `malloc`, under a
+//! condition proved from mimalloc's size classes (see [`plain`]).
 
 use std::alloc::{GlobalAlloc, Layout};
 use std::ffi::c_void;
