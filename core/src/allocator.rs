@@ -44,6 +44,31 @@ fn plain(size: usize, align: usize) -> bool {
     align <= MAX_PLAIN_ALIGN && size % align == 0
 }
 
+/// A fresh block for `layout` from mimalloc's plain function (`plain`: `mi_malloc` or
+/// `mi_zalloc`) when [`plain`] says its alignment is given, else from the aligned one.
+///
+/// # Safety
+///
+/// `layout` has a non-zero size (the `GlobalAlloc` contract). mimalloc's allocation
+/// functions take any size and a power-of-two alignment (a `Layout`'s) and return a
+/// fresh block or null.
+#[allow(unsafe_code)]
+#[inline(always)]
+unsafe fn fresh(
+    layout: Layout,
+    plain_fn: unsafe extern "C" fn(usize) -> *mut c_void,
+    aligned_fn: unsafe extern "C" fn(usize, usize) -> *mut c_void,
+) -> *mut u8 {
+    // SAFETY: the function's contract, above.
+    unsafe {
+        if plain(layout.size(), layout.align()) {
+            plain_fn(layout.size()).cast()
+        } else {
+            aligned_fn(layout.size(), layout.align()).cast()
+        }
+    }
+}
+
 /// mimalloc as the extension's allocator (see the module's documentation).
 pub struct Mimalloc;
 
@@ -56,27 +81,14 @@ pub struct Mimalloc;
 unsafe impl GlobalAlloc for Mimalloc {
     #[inline]
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        // SAFETY: mimalloc's allocation functions take any size and a power-of-two
-        // alignment (a `Layout`'s), and return a fresh block or null.
-        unsafe {
-            if plain(layout.size(), layout.align()) {
-                mi_malloc(layout.size()).cast()
-            } else {
-                mi_malloc_aligned(layout.size(), layout.align()).cast()
-            }
-        }
+        // SAFETY: see `fresh`.
+        unsafe { fresh(layout, mi_malloc, mi_malloc_aligned) }
     }
 
     #[inline]
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        // SAFETY: as `alloc`; the block is zeroed.
-        unsafe {
-            if plain(layout.size(), layout.align()) {
-                mi_zalloc(layout.size()).cast()
-            } else {
-                mi_zalloc_aligned(layout.size(), layout.align()).cast()
-            }
-        }
+        // SAFETY: see `fresh`; the block is zeroed.
+        unsafe { fresh(layout, mi_zalloc, mi_zalloc_aligned) }
     }
 
     #[inline]
