@@ -566,9 +566,17 @@ class WorldModel:
         except for a small batch the Rust engine takes in one call, which makes too few
         Python objects for the pause to pay.
         """
-        batch = as_batch(detections)
+        # as_batch and _read_plain, inlined for the common small list
+        batch = list(detections) if type(detections) is list else as_batch(detections)
         if len(batch) <= _UNPAUSED_BATCH:
-            read = self._read_plain(batch, sensor)
+            reader = self._reader
+            answer = None if reader is None else reader.read(batch, self._seq)
+            read: _Read | None
+            if answer is None or not answer[2]:
+                # none unplaced: its empty list is the list of what is ignored too
+                read = answer  # type: ignore[assignment]
+            else:
+                read = self._read_unplaced(batch, sensor, answer)
             done = None if sensor is not None else self._ingest_scan(read, len(batch))
             if done is not None:
                 return done
@@ -659,7 +667,7 @@ class WorldModel:
         log = self._log
         if log and not log[-1].key < key:
             return None  # a replay: the general path
-        time, latest = key[0], state.time
+        time, latest = key[0], state.core.time  # the core's, not the property's frame
         if latest is not None:
             if time < latest - self.reorder_window - 1e-12:
                 raise OutOfOrderError(time, latest, self.reorder_window)
@@ -687,7 +695,7 @@ class WorldModel:
         )
         # _commit, inlined; the log trimmed (_trimmed) only when it holds a scan older
         # than the window or more scans than it may
-        after_time = after_state.time
+        after_time = after_state.core.time
         window = self.reorder_window
         if window > 0:
             kept = [*log, _new_tuple(_LoggedScan, (key, scan, state, None, book))]
@@ -722,10 +730,20 @@ class WorldModel:
         read = self._reader.read(batch, self._seq)
         if read is None:
             return None
-        count, scans, unplaced = read
-        if not unplaced:
+        if not read[2]:
             # its list of the unplaced is empty, so a list of what is ignored too
             return read  # type: ignore[return-value]
+        return self._read_unplaced(batch, sensor, read)
+
+    def _read_unplaced(
+        self,
+        batch: list[DetectionInput],
+        sensor: object,
+        read: tuple[int, dict[ScanKey, Sequence[Measurement]], list[int]],
+    ) -> _Read | None:
+        """:meth:`_read_plain` of a batch the reader read (``read``) but for the
+        detections it left unplaced (their indices, ``read[2]``, not empty)."""
+        count, scans, unplaced = read
         skipped = None if sensor is not None else self._ignored_apart(batch, unplaced)
         return None if skipped is None else (count, scans, skipped)
 

@@ -10,10 +10,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from semwm import world
 from semwm.filters.engine import rust_core
 from semwm.mhf import core_engine
 from semwm.sim.scenarios import SCENARIOS
-from semwm.world import WorldModel
 
 BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
@@ -41,10 +41,11 @@ def test_a_run_in_step_is_equal_and_written() -> None:
 
 
 def _every_scan_through_scan_rows(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The Rust side's batches read by the specification (``_read_plain`` finds none
-    plain), so that each of its scans goes to the core through ``CoreEngine.scan_rows``
-    (the reader's scans go in one call, ``Engine.process_and_publish``)."""
-    monkeypatch.setattr(WorldModel, "_read_plain", lambda self, batch, sensor: None)
+    """The Rust side's batches read by the specification (its models made without the
+    core's reader), so that each of its scans goes to the core through
+    ``CoreEngine.scan_rows`` (the reader's scans go in one call,
+    ``Engine.process_and_publish``)."""
+    monkeypatch.setattr(world, "core_reader", lambda *arguments: None)
 
 
 def test_a_nudged_rust_engine_shows(monkeypatch: pytest.MonkeyPatch) -> None:
