@@ -201,10 +201,10 @@ impl Filter {
             .collect();
         if self.tables.observed_rates {
             let lineages: Vec<u64> = predicted.rows.iter().map(|r| r.version.lineage).collect();
-            let classes: Vec<&str> = predicted
+            let classes: Vec<&Name> = predicted
                 .rows
                 .iter()
-                .map(|r| self.tables.classes[r.version.cls].name.as_ref())
+                .map(|r| &self.tables.classes[r.version.cls].name)
                 .collect();
             f = observed.source_rates(&scan.source, &lineages, &f, &classes);
         }
@@ -437,10 +437,10 @@ impl Filter {
             .iter()
             .map(|r| self.tables.classes[r.version.cls].detection_frequency)
             .collect();
-        let classes: Vec<&str> = predicted
+        let classes: Vec<&Name> = predicted
             .rows
             .iter()
-            .map(|r| self.tables.classes[r.version.cls].name.as_ref())
+            .map(|r| &self.tables.classes[r.version.cls].name)
             .collect();
         let unconfirmed: Vec<bool> = predicted
             .rows
@@ -450,7 +450,7 @@ impl Filter {
         let mut rates: Vec<Option<Vec<f64>>> = vec![None; self.tables.detectors.len()];
         for m in measurements {
             if rates[m.detector].is_none() {
-                let detector = self.tables.detectors[m.detector].name.as_ref();
+                let detector = &self.tables.detectors[m.detector].name;
                 rates[m.detector] = Some(observed.stream_rates(
                     (source, detector),
                     &lineages,

@@ -23,7 +23,7 @@
 //! what did not change (names are `Arc<str>`, a lineage's streams an `Arc`).
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::sync::Arc;
+use std::sync::{Arc, LazyLock};
 
 use crate::mhf::hypotheses::{KeyMap, KeySet};
 
@@ -154,16 +154,27 @@ fn name(text: &str) -> Name {
     Arc::from(text)
 }
 
+/// The class `""` (a caller that gives none), one for all: shared, not made per call.
+fn no_class() -> Name {
+    static NO_CLASS: LazyLock<Name> = LazyLock::new(|| name(""));
+    NO_CLASS.clone()
+}
+
 impl ObservedRates {
     /// `g`: the stream's observed rate per object of class `cls` in view (Hz); 0 until
     /// its source has scanned twice. `class_rate`: the class's knowledge rate, the
     /// prior's mean (`min(1, f_c Δ̄_s)` per scan); else 1/2 per scan.
     pub fn rate(&self, source: &str, detector: &str, cls: &str, class_rate: Option<f64>) -> f64 {
-        let Some(clock) = self.sources.get(source) else {
+        self.rate_of(&(name(source), name(detector), name(cls)), class_rate)
+    }
+
+    /// [`rate`](Self::rate) of the stream and class `key` names: the scan's callers hold
+    /// the names, so that no name is made to look one up.
+    fn rate_of(&self, key: &CountKey, class_rate: Option<f64>) -> f64 {
+        let Some(clock) = self.sources.get(&key.0) else {
             return 0.0;
         };
-        let key: CountKey = (name(source), name(detector), name(cls));
-        let Some(counts) = self.streams.get(&key) else {
+        let Some(counts) = self.streams.get(key) else {
             return 0.0;
         };
         let interval = match clock.interval {
@@ -198,7 +209,7 @@ impl ObservedRates {
         source: &str,
         lineages: &[u64],
         class_rates: &[f64],
-        classes: &[&str],
+        classes: &[&Name],
     ) -> Vec<f64> {
         let mut result = class_rates.to_vec();
         if self.seen.is_empty() {
@@ -214,9 +225,10 @@ impl ObservedRates {
                 if &**stream_source != source {
                     continue;
                 }
-                let key = (&**stream_source, &**detector, classes[i]);
+                let key = (&**stream_source, &**detector, &**classes[i]);
                 let g = *rates.entry(key).or_insert_with(|| {
-                    self.rate(stream_source, detector, classes[i], Some(class_rates[i]))
+                    let stream = (stream_source.clone(), detector.clone(), classes[i].clone());
+                    self.rate_of(&stream, Some(class_rates[i]))
                 });
                 if g > result[i] {
                     result[i] = g;
@@ -232,11 +244,11 @@ impl ObservedRates {
     /// with no detection but the one that started them.
     pub fn stream_rates(
         &self,
-        (source, detector): (&str, &str),
+        (source, detector): (&Name, &Name),
         lineages: &[u64],
         class_rates: &[f64],
         time: f64,
-        classes: Option<&[&str]>,
+        classes: Option<&[&Name]>,
         unconfirmed: Option<&[bool]>,
     ) -> Vec<f64> {
         match self.sources.get(source) {
@@ -246,14 +258,13 @@ impl ObservedRates {
         let mut by_class: BTreeMap<&str, f64> = BTreeMap::new();
         let g: Vec<f64> = (0..lineages.len())
             .map(|i| {
-                let cls = classes.map_or("", |c| c[i]);
+                let cls = classes.map_or("", |c| &**c[i]);
                 *by_class.entry(cls).or_insert_with(|| {
-                    let prior = if cls.is_empty() {
-                        None
-                    } else {
-                        Some(class_rates[i])
+                    let (cls, prior) = match classes {
+                        Some(c) if !cls.is_empty() => (c[i].clone(), Some(class_rates[i])),
+                        _ => (no_class(), None),
                     };
-                    self.rate(source, detector, cls, prior)
+                    self.rate_of(&(source.clone(), detector.clone(), cls), prior)
                 })
             })
             .collect();
@@ -271,7 +282,7 @@ impl ObservedRates {
                     .and_then(|streams| {
                         streams
                             .iter()
-                            .find(|((s, d), _)| &**s == source && &**d == detector)
+                            .find(|((s, d), _)| s == source && d == detector)
                             .map(|(_, at)| *at)
                     })
                     .unwrap_or(f64::NEG_INFINITY);
@@ -355,7 +366,7 @@ impl ObservedRates {
             scan.classes
                 .as_ref()
                 .and_then(|classes| classes.get(&lineage).cloned())
-                .unwrap_or_else(|| name(""))
+                .unwrap_or_else(no_class)
         };
         let mut streams = self.streams.clone();
         let mut keys: BTreeSet<CountKey> = streams
@@ -655,10 +666,17 @@ mod tests {
         for k in 1..=20 {
             rates = rates.after_scan(&scan(f64::from(k) * 0.1, &[1], &[], &[1, 2]));
         }
-        let f = rates.stream_rates(("a", "cam"), &[1, 2], &[2.0, 2.0], 2.1, None, None);
+        let f = rates.stream_rates(
+            (&name("a"), &name("cam")),
+            &[1, 2],
+            &[2.0, 2.0],
+            2.1,
+            None,
+            None,
+        );
         assert!(f[0] > 2.0, "{f:?}");
         assert_eq!(f[1], 2.0);
-        let later = rates.stream_rates(("a", "cam"), &[1], &[2.0], 60.0, None, None);
+        let later = rates.stream_rates((&name("a"), &name("cam")), &[1], &[2.0], 60.0, None, None);
         assert_eq!(later, vec![2.0]);
     }
 }
