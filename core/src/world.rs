@@ -239,7 +239,32 @@ pub fn current(
     let mut kept: Summaries = KeyMap::default();
     kept.reserve(versions);
     let mut totals = LineageTotals::new(floor, versions);
+    // version `key` of probability mass `p`, added to its lineage's total
+    let mut add = |key: Key, p: f64| {
+        let entry = &state.tracks[&key];
+        let lineage = entry.version.lineage;
+        let inside = summaries
+            .entry(key)
+            .or_insert_with(|| {
+                let made = match cache.get(&entry.serial) {
+                    Some(made) => made.clone(),
+                    None => Arc::new(summary(&entry.version, tables)),
+                };
+                kept.insert(entry.serial, made.clone());
+                made
+            })
+            .inside;
+        totals.add(lineage, key, p, entry.existence * inside);
+    };
     for cluster in &state.clusters {
+        if let [only] = cluster.hypotheses.as_slice() {
+            // one hypothesis (a certain cluster): its keys, each once, have its mass
+            let p = only.log_weight.exp();
+            for &key in &only.keys {
+                add(key, 0.0 + p);
+            }
+            continue;
+        }
         // each version's probability mass, in order of first appearance
         let mut mass: Vec<(Key, f64)> = Vec::with_capacity(cluster.keys.len());
         let mut mass_at: KeyMap<Key, usize> = KeyMap::default();
@@ -257,20 +282,7 @@ pub fn current(
             }
         }
         for (key, p) in mass {
-            let entry = &state.tracks[&key];
-            let lineage = entry.version.lineage;
-            let inside = summaries
-                .entry(key)
-                .or_insert_with(|| {
-                    let made = match cache.get(&entry.serial) {
-                        Some(made) => made.clone(),
-                        None => Arc::new(summary(&entry.version, tables)),
-                    };
-                    kept.insert(entry.serial, made.clone());
-                    made
-                })
-                .inside;
-            totals.add(lineage, key, p, entry.existence * inside);
+            add(key, p);
         }
     }
     let marginals: Vec<Marginal> = totals
