@@ -163,6 +163,36 @@ def test_the_reader_makes_what_the_specification_makes(knowledge: Any, data: Any
         _rows_say_the_values(model, scan)
 
 
+def test_a_batch_of_many_scans_is_grouped_as_the_specification_groups_it() -> None:
+    """A batch of more scans than the reader looks through one by one (it then keeps a
+    table of them): each detection joins the scan of its time and source wherever it
+    comes in the batch, before the table is made, while it is made and after."""
+    model = WorldModel(SIM1, engine="rust")
+    reader = _reader(model)
+    keys = [(float(t), source) for t in range(12) for source in ("r1", "r2")]
+    order = np.random.default_rng(5).permutation(np.repeat(np.arange(len(keys)), 3))
+    cls = sorted(SIM1.classes)[0]
+    batch = [
+        {
+            "time": keys[k][0],
+            "class": cls,
+            "position": [1.0 + 0.001 * i] * SIM1.world.dimension,
+            "source": keys[k][1],
+        }
+        for i, k in enumerate(order)
+    ]
+    answer = reader.read(batch, 7)
+    assert answer is not None
+    count, scans, unplaced = answer
+    assert (count, len(scans), unplaced) == (len(batch), len(keys), [])
+    expected = _specification(model, batch, 7)
+    assert expected is not None and expected[1] == []
+    read = _in_batch_order(scans)
+    for a, b in zip(read, expected[0], strict=True):
+        _same(a, b)
+    _same_scans(scans, read)
+
+
 def _reader(model: WorldModel) -> Any:
     assert model._mhf._core is not None
     return core_reader(model.knowledge, model._mhf.factory, model._mhf._core)

@@ -104,18 +104,13 @@ fn bounded_float(value: &Bound<'_, PyAny>, low: f64, high: f64) -> Option<f64> {
 
 /// A list or tuple of `dim` finite Python floats.
 fn finite_vector(value: &Bound<'_, PyAny>, dim: usize) -> Option<Vec<f64>> {
-    let items = if let Ok(list) = value.cast_exact::<PyList>() {
-        list.iter().collect::<Vec<_>>()
+    let finite = |item: Bound<'_, PyAny>| bounded_float(&item, f64::MIN, f64::MAX);
+    if let Ok(list) = value.cast_exact::<PyList>() {
+        (list.len() == dim).then(|| list.iter().map(finite).collect())?
     } else {
-        value.cast_exact::<PyTuple>().ok()?.iter().collect()
-    };
-    if items.len() != dim {
-        return None;
+        let tuple = value.cast_exact::<PyTuple>().ok()?;
+        (tuple.len() == dim).then(|| tuple.iter().map(finite).collect())?
     }
-    items
-        .iter()
-        .map(|item| bounded_float(item, f64::MIN, f64::MAX))
-        .collect()
 }
 
 /// An exact Python string, or `None` when absent; `Err(())` for anything else.
@@ -292,12 +287,19 @@ enum Reading<'py> {
     Unplaced,
 }
 
-/// A scan being read: its key and its detections so far.
+/// A scan being read: its key (as Python's and as the reader's), and its detections so
+/// far.
 struct Building<'py> {
     key: Bound<'py, PyTuple>,
+    bits: u64,
+    source: Name,
     rows: Vec<Measurement>,
     given: Vec<Given>,
 }
+
+/// A batch of up to this many scans finds a detection's scan by looking at each; one of
+/// more, in a table (made when it gets there).
+const SCANS_LOOKED_AT: usize = 8;
 
 #[pymethods]
 impl PyDetectionReader {
@@ -383,9 +385,9 @@ impl PyDetectionReader {
         first_seq: u64,
     ) -> PyResult<Option<(usize, Bound<'py, PyDict>, Vec<usize>)>> {
         let mut building: Vec<Building<'py>> = Vec::new();
-        // scan keys (time with -0.0 as 0.0, as a dict's keys compare; source) -> index
-        // (KeyHasher: a batch is mostly one scan, and SipHash cost about 200 instructions
-        // a detection)
+        // scan keys (time with -0.0 as 0.0, as a dict's keys compare; source) -> index,
+        // once the batch has more than SCANS_LOOKED_AT scans (KeyHasher: SipHash cost
+        // about 200 instructions a detection)
         let mut index: HashMap<(u64, Name), usize, KeyHashing> = HashMap::default();
         // the scan of the previous detection: a batch's detections come in runs
         let mut current: Option<(f64, Name, usize)> = None;
@@ -410,8 +412,23 @@ impl PyDetectionReader {
                 }
                 _ => {
                     let bits = if time == 0.0 { 0.0f64 } else { time }.to_bits();
-                    match index.get(&(bits, source.clone())) {
-                        Some(&at) => at,
+                    let found = if building.len() <= SCANS_LOOKED_AT {
+                        building
+                            .iter()
+                            .position(|scan| scan.bits == bits && scan.source == source)
+                    } else {
+                        if index.is_empty() {
+                            index.extend(
+                                building
+                                    .iter()
+                                    .enumerate()
+                                    .map(|(at, scan)| ((scan.bits, scan.source.clone()), at)),
+                            );
+                        }
+                        index.get(&(bits, source.clone())).copied()
+                    };
+                    match found {
+                        Some(at) => at,
                         None => {
                             // the key as `_grouped` makes it: `(m.time, m.source or "")`
                             let text = match &read.given.source {
@@ -421,10 +438,14 @@ impl PyDetectionReader {
                             let key = PyTuple::new(py, [read.time.clone(), text])?;
                             building.push(Building {
                                 key,
+                                bits,
+                                source: source.clone(),
                                 rows: Vec::new(),
                                 given: Vec::new(),
                             });
-                            index.insert((bits, source.clone()), building.len() - 1);
+                            if !index.is_empty() {
+                                index.insert((bits, source.clone()), building.len() - 1);
+                            }
                             building.len() - 1
                         }
                     }
