@@ -132,17 +132,26 @@ impl Filter {
         };
         let low: Vec<f64> = region.iter().map(|(a, _)| *a).collect();
         let high: Vec<f64> = region.iter().map(|(_, b)| *b).collect();
+        // the capped covariance (diagonal), one buffer for all objects: on the stack for
+        // a world of up to 4 dimensions
+        let mut on_stack = [0.0; 16];
+        let mut on_heap = Vec::new();
+        let capped: &mut [f64] = if d * d <= on_stack.len() {
+            &mut on_stack[..d * d]
+        } else {
+            on_heap.resize(d * d, 0.0);
+            &mut on_heap
+        };
         (0..predicted.len())
             .map(|i| {
                 let spec = &self.tables.classes[predicted.rows[i].version.cls];
                 let full = predicted.covariance(i);
-                let mut capped = vec![0.0; d * d];
                 for a in 0..d {
                     capped[a * d + a] = np_minimum(full[a * d + a], spec.region_cap[a]);
                 }
                 inside_probability(
                     predicted.position(i),
-                    &capped,
+                    capped,
                     &low,
                     &high,
                     Some(&spec.region_margin),
