@@ -642,7 +642,7 @@ class WorldModel:
         every logged scan: what the general path does (its checks,
         :meth:`_process_scans`, :meth:`_publish`), with no call that case does not need.
         ``None`` (nothing done) when the batch is not that case, or the state not the
-        ``mht`` core's: the general path takes it.
+        core's: the general path takes it.
 
         The scan of one detection takes a few µs in the core, so this path is written
         for the interpreter: no call, table or value it does not need (the model's
@@ -654,7 +654,6 @@ class WorldModel:
         if (
             core is None
             or self._hold != 0
-            or not self._mhf.mht
             or type(state) is not CoreState
             or state.engine is not core
             or type(book) is not CoreBook
@@ -705,7 +704,8 @@ class WorldModel:
                 self._log = kept
         elif log:
             self._log = []
-        self._state, self._book = after_state, CoreBook(after_book)
+        # paper: no confidences (_step), the book the same
+        self._state, self._book = after_state, CoreBook(after_book) if self._mhf.mht else book
         self._published_core(shown, unchanged)
         self._seq += size
         result: IngestResult = _new_object(IngestResult)  # made_without_init
@@ -1751,11 +1751,11 @@ class WorldModel:
         core = self._mhf._core
         if (
             core is not None
-            and self._mhf.mht
             and type(state) is CoreState
             and state.engine is core
             and type(self._state) is CoreState
         ):
+            floor = floor if self._mhf.mht else 0.0  # paper: the best hypothesis's objects
             found = self._core_world(state, book, at, floor, cls, near, label, states)
             return WorldState(time=at, objects=tuple(_unique_labels(found)))
         marginals, predicted = self._marginals(at, state)
@@ -1815,9 +1815,10 @@ class WorldModel:
         label: str | None,
         states: set[str] | None,
     ) -> list[WorldObject]:
-        """:meth:`world`'s objects (``mht``), their marginals, the most probable version
-        of each and its prediction to ``at`` made in the core (``Engine.world_at``:
-        :meth:`_marginals` and :meth:`_same_objects` there), in id order."""
+        """:meth:`world`'s objects, their marginals, the most probable version of each
+        and its prediction to ``at`` made in the core (``Engine.world_at``:
+        :meth:`_marginals` and, ``mht``, :meth:`_same_objects` there; ``paper``, the
+        most probable hypothesis's objects), in id order."""
         core = self._mhf._core
         assert core is not None and isinstance(self._state, CoreState)
         rows = core.engine.world_at(state, self._state, at, self._published, self._ids)

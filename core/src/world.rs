@@ -517,12 +517,14 @@ fn near_pairs(positions: &[&[f64]], spread: &[f64]) -> Option<Vec<(usize, usize)
 }
 
 /// The world of `state` predicted to `at` (`WorldModel._marginals` and
-/// `_same_objects`, `mht`): every version predicted to `at`, and one entry per physical
+/// `_same_objects`): every version predicted to `at`, and one entry per physical
 /// object, `(marginal, row)` with `row` the version's row of the prediction, in the
-/// specification's order. Existence at `at`: objects leave at their leave rates past the
-/// state's time and nothing is missed (a query is no scan); versions leaving at `at`
-/// (`Filter::leaving`) count for nothing. `best_keys`, `shown` and `ids`: as
-/// [`same_objects`] takes them, of the model's latest state.
+/// specification's order. `mht`: existence at `at`, objects leaving at their leave rates
+/// past the state's time and nothing missed (a query is no scan); versions leaving at
+/// `at` (`Filter::leaving`) count for nothing. `best_keys`, `shown` and `ids`: as
+/// [`same_objects`] takes them, of the model's latest state. `paper`: every version
+/// certain and inside, the objects of `state`'s most probable hypothesis only, none
+/// grouped (`WorldModel.world`'s `paper` branch).
 pub fn at(
     filter: &Filter,
     state: &State,
@@ -537,10 +539,15 @@ pub fn at(
     let Some(time) = state.time else {
         return Ok((predicted, Vec::new()));
     };
-    let inside = filter.inside(&predicted);
-    // past the last scan no scan has missed anything: no missed-detection term
-    let future = if at > time { at } else { time };
-    let (existence, _) = filter.existence_at(state, &predicted, future, None, &inside);
+    let (existence, inside) = if tables.mht {
+        let inside = filter.inside(&predicted);
+        // past the last scan no scan has missed anything: no missed-detection term
+        let future = if at > time { at } else { time };
+        let (existence, _) = filter.existence_at(state, &predicted, future, None, &inside);
+        (existence, inside)
+    } else {
+        (vec![1.0; versions.len()], vec![1.0; versions.len()])
+    };
     let gone = filter.leaving(&predicted, at, &existence, &inside);
     let row_of: KeyMap<Key, usize> = versions
         .iter()
@@ -578,6 +585,14 @@ pub fn at(
                 }
             }
         }
+    }
+    if !tables.mht {
+        let best: KeySet<u64> = self::best_keys(state)
+            .iter()
+            .map(|key| state.tracks[key].version.lineage)
+            .collect();
+        result.retain(|(m, _)| best.contains(&m.lineage));
+        return Ok((predicted, result));
     }
     let rows: KeyMap<u64, usize> = result.iter().map(|(m, row)| (m.lineage, *row)).collect();
     let points: Vec<(&[f64], &[f64])> = result

@@ -26,6 +26,8 @@ from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.mhf.core_engine import as_python
 from semwm.mhf.measurement import Measurement
 from semwm.mhf.state import MHFState
+from semwm.sim.runner import scans
+from semwm.sim.scenarios import make_scenario
 from semwm.validation import as_batch, check, core_reader, parse
 from semwm.world import WorldModel, _grouped
 
@@ -405,3 +407,56 @@ def test_the_one_scan_path_refuses_what_the_general_path_refuses() -> None:
         outcomes.append(said)
     assert outcomes[0] == outcomes[1]
     assert sum("older than" in line for line in outcomes[0]) == 2, outcomes[0]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_paper_model_takes_the_one_scan_path_and_its_queries_the_core(seed: int) -> None:
+    """Under ``paper`` a scan read whole takes ``WorldModel._ingest_scan`` too, its
+    confidence book left as it was (``_step`` keeps none under ``paper``), and a query
+    is answered in the core (``Engine.world_at``): the same answers, logs and ids as
+    the general path, and the same worlds (now, past and ahead) as the Python engine's."""
+    world = ROBOCUP.world.model_copy(update={"association_model": "paper"})
+    paper = ROBOCUP.model_copy(update={"world": world})
+    fast, general = (WorldModel(paper, engine="rust", reorder_window=0.5) for _ in range(2))
+    python = WorldModel(paper, engine="python", reorder_window=0.5)
+    general._ingest_scan = lambda read, size: None  # type: ignore[method-assign]
+    taken: list[bool] = []
+    one_scan = fast._ingest_scan
+
+    def watched(read: Any, size: int) -> Any:
+        done = one_scan(read, size)
+        taken.append(done is not None)
+        return done
+
+    fast._ingest_scan = watched  # type: ignore[method-assign]
+    queried: list[Any] = []
+    core_world = fast._core_world
+
+    def asked(*args: Any) -> Any:
+        queried.append(args[2])
+        return core_world(*args)
+
+    fast._core_world = asked  # type: ignore[method-assign]
+    frames = 0
+    for batch in scans(make_scenario("robocup", seed, duration=2.0).detections):
+        time, frames = batch[0].time, frames + 1
+        book = fast._book
+        outcomes = [repr(model.ingest(batch)) for model in (fast, general, python)]
+        assert outcomes[0] == outcomes[1] == outcomes[2]
+        assert fast._book is book  # paper: no confidences
+        assert [e.key for e in fast._log] == [e.key for e in general._log]
+        assert fast._ids == general._ids and list(fast._published) == list(general._published)
+        for at in (time, time - 0.25, time + 0.5):
+            a, b = fast.world(at), python.world(at)
+            assert [(o.id, o.cls, o.label) for o in a.objects] == [
+                (o.id, o.cls, o.label) for o in b.objects
+            ]
+            for x, y in zip(a.objects, b.objects, strict=True):
+                assert abs(x.existence - y.existence) <= 1e-12
+                assert np.allclose(x.position, y.position, rtol=0, atol=1e-9)
+                assert np.allclose(x.covariance, y.covariance, rtol=0, atol=1e-9)
+    assert frames > 100 and sum(taken) > 0.9 * frames, (frames, sum(taken))
+    # every query in the core but those before the first scan (nothing to ask)
+    assert len(queried) > 2.5 * frames and min(queried) >= 0.0
+    assert len(fast.world().objects) >= 4
+    assert fast.hypothesis_count > 1  # hypotheses, not one certain world

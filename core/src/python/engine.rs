@@ -789,7 +789,7 @@ impl PyEngine {
     }
 
     /// The world of `state` (a `CoreState`) predicted to `at` (`WorldModel.world`'s
-    /// `_marginals` and `_same_objects`, `mht`; `crate::world::at`): one row per
+    /// `_marginals` and, `mht`, `_same_objects`; `crate::world::at`): one row per
     /// physical object, `(lineage, existence, key, serial, position, covariance,
     /// velocity, mode_probabilities, shown)` in the specification's order, the position
     /// and its covariance as tuples (`velocity` `None` for a filter without one), `shown`
@@ -918,7 +918,8 @@ impl PyEngine {
     /// `process_and_advance` of `state` and `book` over `measurements`, then `publish`
     /// of the state after the scan, in one call (`WorldModel._ingest_scan`):
     /// `(after, book, current, unchanged)`, `after` the `CoreState` that `make_state`
-    /// makes of the core's state after the scan.
+    /// makes of the core's state after the scan. Under `paper` the book is not advanced
+    /// (`WorldModel._step`): `book` is the one given.
     #[pyo3(signature = (state, book, measurements, published, ids, lost, next_id, waiting, make_state))]
     #[allow(clippy::too_many_arguments)]
     fn process_and_publish<'py>(
@@ -944,14 +945,19 @@ impl PyEngine {
         let (held, held_book) = (state.state.clone(), book.book.clone());
         let (after, after_book, rows) = run(py, "Engine.process_and_publish", || {
             let after = filter.process_scan(&held, &scan, None)?;
-            let book = crate::confidence::advance(
-                &held_book,
-                &after,
-                &detectors,
-                None,
-                None,
-                &filter.tables,
-            )?;
+            // paper 004's confidences are kept under `mht` only (`WorldModel._step`)
+            let book = if filter.tables.mht {
+                Arc::new(crate::confidence::advance(
+                    &held_book,
+                    &after,
+                    &detectors,
+                    None,
+                    None,
+                    &filter.tables,
+                )?)
+            } else {
+                held_book
+            };
             let rows = shown_rows(&after, &filter, &summaries, &before, &table);
             Ok((after, book, rows))
         })?;
@@ -964,9 +970,7 @@ impl PyEngine {
         let after = make_state.call1((after,))?;
         let (current, unchanged) =
             engine.published_after(&after, &rows, table, &before, ids, lost, next_id, &waiting)?;
-        let book = PyBook {
-            book: Arc::new(after_book),
-        };
+        let book = PyBook { book: after_book };
         Ok((after, book, current, unchanged))
     }
 
