@@ -8,6 +8,10 @@ For each case, both engines run the same scans in the same process, interleaved
   of the timed frames, best of ``--repeats`` runs);
 * sim2 and robocup (2 s), seed 0: CPU µs per detection and per scan of the whole run
   (best of the repeats);
+* a robot that reads the world as it reports: sim2, robocup (2 s) and robocup under
+  the ``paper`` association model, the world asked for after each scan at its time:
+  CPU µs per detection of the ingest calls and µs per ``world()`` call (best of the
+  repeats);
 * the kernels alone: one ``ClassFilter.predict`` and one ``update`` of N objects
   (robocup.yaml's ``Robot``, a 2-mode IMM with a transition period, 2-D) for N = 1,
   10, 100, 1,000: µs per call (best of ``--repeats`` loops), what crossing to Rust
@@ -212,6 +216,61 @@ def scenario(name: str, repeats: int, engines: tuple[Engine, ...]) -> dict[str, 
             for engine, seconds in total.items()
         },
     }
+
+
+QUERY_CASES: tuple[tuple[str, str, dict[str, Any], str | None], ...] = (
+    ("sim2", "sim2", {}, None),
+    ("robocup 2 s", "robocup", {"duration": 2.0}, None),
+    ("robocup 2 s, paper", "robocup", {"duration": 2.0}, "paper"),
+)
+"""(label, scenario, sizes, association model or None for the knowledge's) of
+:func:`queries`."""
+
+
+def queries(repeats: int, engines: tuple[Engine, ...]) -> list[dict[str, Any]]:
+    """A robot that reads the world as it reports: each case's scans (seed 0) ingested
+    into a fresh world model (default options), the world asked for at each scan's time
+    after it. CPU µs per detection of the ingest calls and µs per ``world()`` call,
+    each the best of ``repeats`` runs, the engines in turn."""
+    rows = []
+    for label, name, sizes, model in QUERY_CASES:
+        scenario = make_scenario(name, 0, **sizes)
+        knowledge = _scenario_knowledge(scenario, model)
+        all_scans = list(scans(scenario.detections))
+        detections = sum(len(scan) for scan in all_scans)
+        best: dict[str, dict[str, float]] = {}
+        for _ in range(repeats):
+            for engine in engines:
+                world_model = WorldModel(knowledge, engine=engine)
+                ingest = asked = 0.0
+                objects = 0
+                for scan in all_scans:
+                    start = time.process_time()
+                    world_model.ingest(scan)
+                    middle = time.process_time()
+                    objects += len(world_model.world(scan[0].time).objects)
+                    asked += time.process_time() - middle
+                    ingest += middle - start
+                was = best.setdefault(engine, {"ingest": math.inf, "query": math.inf})
+                was["ingest"] = min(was["ingest"], ingest)
+                was["query"] = min(was["query"], asked)
+                was["objects_per_query"] = objects / len(all_scans)
+        rows.append(
+            {
+                "case": label,
+                "detections": detections,
+                "queries": len(all_scans),
+                **{
+                    engine: {
+                        "ingest_us_per_detection": 1e6 * b["ingest"] / detections,
+                        "us_per_query": 1e6 * b["query"] / len(all_scans),
+                        "objects_per_query": b["objects_per_query"],
+                    }
+                    for engine, b in best.items()
+                },
+            }
+        )
+    return rows
 
 
 KERNEL_SIZES = (1, 10, 100, 1000)
@@ -774,6 +833,7 @@ def run(quick: bool, repeats: int, seeds: int) -> dict[str, Any]:
         "engines": {engine: engine_description(engine) for engine in engines},
         "repeats": repeats,
         "cases": cases,
+        "queries": queries(repeats, engines),
         "kernels": kernels(repeats, engines),
         "existence_kernels": existence_kernels(repeats, engines),
         "filter_share_robocup": filter_share(engines),
@@ -818,6 +878,24 @@ def markdown(doc: dict[str, Any]) -> str:
             ratio = f"{p_us / r_us:.2f}x" if r_us > 0.0 else "-"
             rust = fmt(r_us) if r_us > 0.0 else whole
             lines.append(f"| {case['case']} | {fmt(p_us)} | {rust} | {ratio} |")
+    lines += [
+        "",
+        "A robot that reads the world as it reports: the scans ingested, the world asked "
+        "for at each scan's time after it (default options), CPU µs per detection of the "
+        "ingest calls and µs per `world()` call, each the best of the repeats:",
+        "",
+        "| case | detections | queries | objects / query | Python ingest µs/det "
+        "| Rust ingest µs/det | Python µs/query | Rust µs/query | Python / Rust (query) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in doc.get("queries", []):
+        p, r = row["python"], row["rust"]
+        lines.append(
+            f"| {row['case']} | {row['detections']} | {row['queries']} "
+            f"| {fmt(r['objects_per_query'], 3)} | {fmt(p['ingest_us_per_detection'])} "
+            f"| {fmt(r['ingest_us_per_detection'])} | {fmt(p['us_per_query'])} "
+            f"| {fmt(r['us_per_query'])} | {p['us_per_query'] / r['us_per_query']:.1f}x |"
+        )
     lines += [
         "",
         "The kernels alone, µs per call (robocup's Robot: IMM, 2 modes, 4 states, 2-D):",
