@@ -92,6 +92,9 @@ _TENTATIVE_FLOOR = 1e-12  # a tentative object by id: whatever its existence
 # a batch of at most this many detections the Rust engine takes in one call makes so few
 # Python objects that pausing the collector (semwm.collector) costs more than it saves
 _UNPAUSED_BATCH = 64
+# a query's answer of more objects than this is made with the collector paused: each
+# object is several Python objects, none in a cycle (semwm.collector)
+_UNPAUSED_QUERY = 64
 
 
 IgnoreReason = Literal["out_of_range", "outside_region"]
@@ -1758,6 +1761,27 @@ class WorldModel:
             floor = floor if self._mhf.mht else 0.0  # paper: the best hypothesis's objects
             found = self._core_world(state, book, at, floor, cls, near, label, states)
             return WorldState(time=at, objects=tuple(_unique_labels(found)))
+        if len(state.tracks) <= _UNPAUSED_QUERY:
+            found = self._spec_world(state, book, at, floor, cls, near, label, states)
+        else:
+            with collector_paused():  # many objects made, none in a cycle
+                found = self._spec_world(state, book, at, floor, cls, near, label, states)
+        return WorldState(time=at, objects=tuple(_unique_labels(found)))
+
+    def _spec_world(
+        self,
+        state: StateView,
+        book: BookView,
+        at: float,
+        floor: float,
+        cls: str | None,
+        near: Sequence[float] | None,
+        label: str | None,
+        states: set[str] | None,
+    ) -> list[WorldObject]:
+        """:meth:`world`'s objects from the state's Python values (the Python engine's
+        path, the specification of :meth:`_core_world`), in id order."""
+        dim = self._knowledge.world.dimension
         marginals, predicted = self._marginals(at, state)
         if self._mhf.mht:
             marginals = self._same_objects(
@@ -1802,7 +1826,7 @@ class WorldModel:
                 continue
             objects.append(obj)
         objects.sort(key=lambda o: o.id)
-        return WorldState(time=at, objects=tuple(_unique_labels(objects)))
+        return objects
 
     def _core_world(
         self,
@@ -1822,6 +1846,24 @@ class WorldModel:
         core = self._mhf._core
         assert core is not None and isinstance(self._state, CoreState)
         rows = core.engine.world_at(state, self._state, at, self._published, self._ids)
+        if len(rows) <= _UNPAUSED_QUERY:
+            return self._core_objects(rows, book, at, floor, cls, near, label, states)
+        with collector_paused():  # many objects made, none in a cycle
+            return self._core_objects(rows, book, at, floor, cls, near, label, states)
+
+    def _core_objects(
+        self,
+        rows: list[tuple[Any, ...]],
+        book: BookView,
+        at: float,
+        floor: float,
+        cls: str | None,
+        near: Sequence[float] | None,
+        label: str | None,
+        states: set[str] | None,
+    ) -> list[WorldObject]:
+        """:meth:`_core_world`'s objects of the core's rows (``Engine.world_at``), in id
+        order."""
         covered = self.taxonomy.covers(cls) if cls is not None else None
         dim = self._knowledge.world.dimension
         objects = []

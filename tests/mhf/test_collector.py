@@ -1,6 +1,7 @@
 """The cyclic garbage collector is paused while a batch is processed and resumed after,
 as it was, however pauses overlap; not for a small batch the Rust engine takes in one
-call (``WorldModel._ingest_scan``), which makes too few Python objects for it to pay."""
+call (``WorldModel._ingest_scan``), which makes too few Python objects for it to pay.
+A query's answer of many objects is made with it paused too."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import pytest
 
 from semwm.collector import collector_paused
 from semwm.detection import DetectionError
-from semwm.filters.engine import rust_core
+from semwm.filters.engine import ENGINES, rust_core
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.world import WorldModel
@@ -102,3 +103,38 @@ def test_a_scan_in_one_call_pauses_the_collector_only_when_large() -> None:
     model.ingest(scan(2.0, 2))
     model.ingest(scan(3.0, 80))
     assert during == [True, True, False] and gc.isenabled()
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_large_worlds_objects_are_made_with_the_collector_paused(engine: str) -> None:
+    """``world()`` makes each object's Python values (several objects each, none in a
+    cycle) with the collector paused when it answers more than 64 objects, and not for
+    a small world, where the pause would cost more than it saves; it is resumed after,
+    also when the query refuses."""
+    if engine == "rust" and rust_core() is None:
+        pytest.skip("the Rust core is not built")
+    model = WorldModel(load_knowledge(shipped_knowledge_path("sim1.yaml")), engine=engine)
+    during: list[bool] = []
+    make = model._world_object
+
+    def watched(*args: object, **kwargs: object) -> object:
+        during.append(gc.isenabled())
+        if failing and len(during) == 5:
+            raise RuntimeError("planted")
+        return make(*args, **kwargs)  # type: ignore[arg-type]
+
+    failing = False
+    model._world_object = watched  # type: ignore[method-assign]
+    cups = [{"class": "Cup", "position": [0.3 * (i % 10), 0.3 * (i // 10)]} for i in range(80)]
+    model.ingest([{**cup, "time": 1.0} for cup in cups[:3]])
+    assert len(model.world(min_existence=1e-6).objects) == 3
+    assert during == [True] * 3 and gc.isenabled()
+    during.clear()
+    model.ingest([{**cup, "time": 2.0} for cup in cups])
+    answered = model.world(min_existence=1e-6).objects
+    assert len(answered) > 64 and during == [False] * len(answered) and gc.isenabled()
+    during.clear()
+    failing = True
+    with pytest.raises(RuntimeError, match="planted"):
+        model.world(min_existence=1e-6)
+    assert during == [False] * 5 and gc.isenabled()
