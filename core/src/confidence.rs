@@ -104,8 +104,7 @@ pub fn advance(
         if !unseen.is_empty() {
             let predicted = predict(&unseen, time, tables)?;
             for (i, v) in unseen.iter().enumerate() {
-                let p = predicted.in_view(i, &view.view, None)?;
-                if p >= 0.5 || view.looks_at(v.lineage) {
+                if predicted.in_view_reaches(i, &view.view, 0.5)? || view.looks_at(v.lineage) {
                     looked.insert(v.lineage);
                 }
             }

@@ -262,6 +262,110 @@ fn remainder(a: f64, b: f64) -> f64 {
     }
 }
 
+/// The sensor's heading as a unit vector and the cosine of its half angle, made once
+/// per object for [`within_half_angle`].
+struct Opening {
+    hx: f64,
+    hy: f64,
+    half_angle: f64,
+    cos_half: f64,
+    sin_half: f64,
+}
+
+impl Opening {
+    fn of(view: &View, half_angle: f64) -> Opening {
+        Opening {
+            hx: view.heading.cos(),
+            hy: view.heading.sin(),
+            half_angle,
+            cos_half: half_angle.cos(),
+            sin_half: half_angle.sin(),
+        }
+    }
+}
+
+/// Whether the point `(ox, oy)` from the sensor, `distance` from it, lies within the
+/// sensor's half angle of its heading: the bearing's test of `in_view_probability`,
+/// `|wrap(atan2(oy, ox) - heading)| <= half_angle`, answered without `atan2` where the
+/// point is clearly on one side. The angle between the point and the heading is within
+/// a half angle in `[0, pi)` exactly when `o . h >= |o| cos(half_angle)`; where the two
+/// sides differ by more than `1e-9 |o|` (rounding moves either test by about
+/// `1e-15 |o|`) both tests answer the same, and only points nearer the edge than that
+/// (or at the sensor) take the bearing.
+fn within_half_angle(ox: f64, oy: f64, distance: f64, view: &View, opening: &Opening) -> bool {
+    let half_angle = opening.half_angle;
+    if half_angle >= std::f64::consts::PI {
+        return true; // |bearing| <= pi
+    }
+    if half_angle >= 0.0 {
+        let gap = ox * opening.hx + oy * opening.hy - distance * opening.cos_half;
+        let clear = 1e-9 * distance;
+        if gap > clear {
+            return true;
+        }
+        if gap < -clear {
+            return false;
+        }
+    }
+    half_angle - bearing(ox, oy, view).abs() >= 0.0
+}
+
+/// Whether the point `(ox, oy)`, `distance` from the sensor, lies within the sensor's
+/// half angle of its heading and at least `m` (m) from the opening's nearer edge: the
+/// eroded view's test of `in_view_probability`, `slack = half_angle - |bearing| >= 0`
+/// and `distance sin(slack) >= m` (`distance` when `slack >= pi / 2`). With `o . h =
+/// |o| cos(bearing)` and `|o x h| = |o| sin|bearing|` the distance to the edge is
+/// `sin(half_angle) o . h - cos(half_angle) |o x h|` (the same identity, no `atan2`),
+/// used where each test is clear by far more than rounding, as in
+/// [`within_half_angle`]; otherwise the bearing decides.
+fn clear_of_the_edge(
+    ox: f64,
+    oy: f64,
+    distance: f64,
+    view: &View,
+    opening: &Opening,
+    m: f64,
+) -> bool {
+    let half_angle = opening.half_angle;
+    if (0.0..std::f64::consts::PI).contains(&half_angle) {
+        let dot = ox * opening.hx + oy * opening.hy;
+        let cross = (opening.hx * oy - opening.hy * ox).abs();
+        let clear = 1e-9 * distance;
+        let gap = dot - distance * opening.cos_half;
+        if gap < -clear {
+            return false; // outside the opening
+        }
+        if gap > clear {
+            // cos(slack) <= 0: at a right angle or more from the nearer edge
+            let to_edge = if opening.cos_half * dot + opening.sin_half * cross <= 0.0 {
+                distance
+            } else {
+                opening.sin_half * dot - opening.cos_half * cross
+            };
+            let room = 1e-9 * (distance + m.abs());
+            if to_edge - m > room {
+                return true;
+            }
+            if to_edge - m < -room {
+                return false;
+            }
+        }
+    }
+    let slack = half_angle - bearing(ox, oy, view).abs();
+    let to_edge = if slack >= 0.5 * std::f64::consts::PI {
+        distance
+    } else {
+        distance * slack.sin()
+    };
+    slack >= 0.0 && to_edge >= m
+}
+
+/// The bearing of `(ox, oy)` from the sensor's heading, wrapped to `[-pi, pi)`.
+fn bearing(ox: f64, oy: f64, view: &View) -> f64 {
+    let two_pi = 2.0 * std::f64::consts::PI;
+    remainder(oy.atan2(ox) - view.heading + std::f64::consts::PI, two_pi) - std::f64::consts::PI
+}
+
 /// The probability that one object lies in `view`, from the horizontal marginal of its
 /// estimate (`x` `(d,)`, `p` `(d, d)`, `d >= 2`): the 7 x 7 Gauss-Hermite points
 /// `x + L g` (`L` the Cholesky factor of `P[:2, :2] + 1e-12 I`), each weighted by
@@ -273,6 +377,33 @@ pub fn in_view_probability(
     d: usize,
     view: &View,
     margin: Option<f64>,
+) -> KernelResult<f64> {
+    in_view_sum(x, p, d, view, margin, None)
+}
+
+/// Whether `in_view_probability(x, p, d, view, None) >= level`, found with the points
+/// summed in the same order but only as far as the answer needs: the partial sums of
+/// weights only grow, so one at `level` or above answers yes; one that the points left
+/// cannot lift to `level` (their weights' sum, with room for rounding) answers no.
+pub fn in_view_reaches(
+    x: &[f64],
+    p: &[f64],
+    d: usize,
+    view: &View,
+    level: f64,
+) -> KernelResult<bool> {
+    Ok(in_view_sum(x, p, d, view, None, Some(level))? >= level)
+}
+
+/// `in_view_probability`'s sum; with `level`, stopped once the sum is at `level` or
+/// cannot reach it (see [`in_view_reaches`]).
+fn in_view_sum(
+    x: &[f64],
+    p: &[f64],
+    d: usize,
+    view: &View,
+    margin: Option<f64>,
+    level: Option<f64>,
 ) -> KernelResult<f64> {
     let a00 = p[0] + 1e-12;
     let a10 = p[d];
@@ -291,7 +422,17 @@ pub fn in_view_probability(
         ));
     }
     let l11 = rest.sqrt();
-    let two_pi = 2.0 * std::f64::consts::PI;
+    if let Some(range) = view.range {
+        // every point beyond the range, by far more than rounding: none counts
+        let widest = GH_X[GH_X.len() - 1] * (l00 * l00 + (l10.abs() + l11).powi(2)).sqrt();
+        let centre = (x[0] - view.position[0]).hypot(x[1] - view.position[1]);
+        if centre - widest > range + 1e-9 * (1.0 + range.abs() + centre) {
+            return Ok(0.0);
+        }
+    }
+    let opening = view
+        .half_angle
+        .map(|half_angle| Opening::of(view, half_angle));
     let mut total = 0.0;
     for (i, &gi) in GH_X.iter().enumerate() {
         for (j, &gj) in GH_X.iter().enumerate() {
@@ -305,24 +446,26 @@ pub fn in_view_probability(
             if let Some(range) = view.range {
                 inside &= distance <= range - m;
             }
-            if let Some(half_angle) = view.half_angle {
-                let bearing = oy.atan2(ox) - view.heading;
-                let bearing =
-                    remainder(bearing + std::f64::consts::PI, two_pi) - std::f64::consts::PI;
-                // the angle to the nearer edge, and (with a margin) the distance to it
-                let slack = half_angle - bearing.abs();
-                inside &= slack >= 0.0;
-                if margin.is_some() {
-                    let to_edge = if slack >= 0.5 * std::f64::consts::PI {
-                        distance
-                    } else {
-                        distance * slack.sin()
-                    };
-                    inside &= to_edge >= m;
-                }
+            if !inside {
+                continue; // beyond the range: its bearing cannot bring it back
+            }
+            if let Some(opening) = &opening {
+                inside = match margin {
+                    None => within_half_angle(ox, oy, distance, view, opening),
+                    Some(m) => clear_of_the_edge(ox, oy, distance, view, opening, m),
+                };
             }
             if inside {
                 total += GH_W[i] * GH_W[j];
+                if level.is_some_and(|level| total >= level) {
+                    return Ok(total);
+                }
+            }
+        }
+        if let Some(level) = level {
+            let left: f64 = GH_W[i + 1..].iter().sum();
+            if total + left < level - 1e-12 {
+                return Ok(total);
             }
         }
     }
@@ -332,6 +475,181 @@ pub fn in_view_probability(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `in_view_probability` as it was written first: every point's bearing by `atan2`,
+    /// the reference the shortcuts must equal bit for bit.
+    fn in_view_by_bearings(
+        x: &[f64],
+        p: &[f64],
+        d: usize,
+        view: &View,
+        margin: Option<f64>,
+    ) -> f64 {
+        let l00 = (p[0] + 1e-12).sqrt();
+        let l10 = p[d] / l00;
+        let l11 = (p[d + 1] + 1e-12 - l10 * l10).sqrt();
+        let two_pi = 2.0 * std::f64::consts::PI;
+        let mut total = 0.0;
+        for (i, &gi) in GH_X.iter().enumerate() {
+            for (j, &gj) in GH_X.iter().enumerate() {
+                let ox = x[0] + (l00 * gi + 0.0 * gj) - view.position[0];
+                let oy = x[1] + (l10 * gi + l11 * gj) - view.position[1];
+                let mut inside = true;
+                let distance = (ox * ox + oy * oy).sqrt();
+                let m = margin.unwrap_or(0.0);
+                if let Some(range) = view.range {
+                    inside &= distance <= range - m;
+                }
+                if let Some(half_angle) = view.half_angle {
+                    let bearing = oy.atan2(ox) - view.heading;
+                    let bearing =
+                        remainder(bearing + std::f64::consts::PI, two_pi) - std::f64::consts::PI;
+                    let slack = half_angle - bearing.abs();
+                    inside &= slack >= 0.0;
+                    if margin.is_some() {
+                        let to_edge = if slack >= 0.5 * std::f64::consts::PI {
+                            distance
+                        } else {
+                            distance * slack.sin()
+                        };
+                        inside &= to_edge >= m;
+                    }
+                }
+                if inside {
+                    total += GH_W[i] * GH_W[j];
+                }
+            }
+        }
+        total
+    }
+
+    #[test]
+    fn in_view_equals_the_bearings_everywhere_and_at_the_edges() {
+        // xorshift: random views and estimates, many of them with a point on a view's
+        // edge (the estimate's mean placed on it, a point variance of 0)
+        let mut seed: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut checked = 0;
+        let mut partly = 0;
+        for case in 0..20_000 {
+            let heading = (next() - 0.5) * 20.0;
+            let half_angle = match case % 5 {
+                0 => None,
+                1 => Some(std::f64::consts::PI + next()),
+                _ => Some(next() * 3.2),
+            };
+            let view = View {
+                position: [(next() - 0.5) * 10.0, (next() - 0.5) * 10.0],
+                heading,
+                range: if case % 7 == 0 {
+                    None
+                } else {
+                    Some(next() * 8.0)
+                },
+                half_angle,
+            };
+            let on_edge = case % 3 == 0 && half_angle.is_some();
+            let (r, angle) = (next() * 6.0, heading + half_angle.unwrap_or(0.0));
+            let x = if on_edge {
+                [
+                    view.position[0] + r * angle.cos(),
+                    view.position[1] + r * angle.sin(),
+                ]
+            } else {
+                [
+                    view.position[0] + (next() - 0.5) * 16.0,
+                    view.position[1] + (next() - 0.5) * 16.0,
+                ]
+            };
+            let spread = if on_edge && case % 2 == 0 {
+                0.0
+            } else {
+                next() * 4.0
+            };
+            let c = (next() - 0.5) * spread;
+            let p = [spread, c, c, spread + next()];
+            for margin in [None, Some(next() * 0.5)] {
+                let fast = in_view_probability(&x, &p, 2, &view, margin).unwrap();
+                let slow = in_view_by_bearings(&x, &p, 2, &view, margin);
+                assert_eq!(
+                    fast.to_bits(),
+                    slow.to_bits(),
+                    "case {case}, margin {margin:?}"
+                );
+                checked += 1;
+                partly += usize::from(fast > 0.0 && fast < 0.999);
+            }
+        }
+        // an eroded view's edge: the mean `margin` from the opening's edge, inside it
+        for case in 0..20_000 {
+            let heading = (next() - 0.5) * 20.0;
+            let half_angle = 0.05 + next() * 3.0;
+            let margin = next() * 0.5;
+            let view = View {
+                position: [(next() - 0.5) * 10.0, (next() - 0.5) * 10.0],
+                heading,
+                range: Some(20.0),
+                half_angle: Some(half_angle),
+            };
+            let r = margin + 0.01 + next() * 6.0;
+            let side = if case % 2 == 0 { 1.0 } else { -1.0 };
+            let angle = heading + side * (half_angle - (margin / r).asin());
+            let x = [
+                view.position[0] + r * angle.cos(),
+                view.position[1] + r * angle.sin(),
+            ];
+            let spread = if case % 4 < 2 { 0.0 } else { next() * 0.01 };
+            let p = [spread, 0.0, 0.0, spread];
+            let fast = in_view_probability(&x, &p, 2, &view, Some(margin)).unwrap();
+            let slow = in_view_by_bearings(&x, &p, 2, &view, Some(margin));
+            assert_eq!(fast.to_bits(), slow.to_bits(), "edge case {case}");
+            checked += 1;
+        }
+        assert_eq!(checked, 60_000);
+        assert!(partly > 2_000, "{partly} estimates across an edge");
+    }
+
+    #[test]
+    fn in_view_reaches_answers_as_the_whole_sum_compares() {
+        let mut seed: u64 = 0x2545_F491_4F6C_DD1D;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut yes, mut no) = (0, 0);
+        for case in 0..20_000 {
+            let view = View {
+                position: [0.0, 0.0],
+                heading: (next() - 0.5) * 7.0,
+                range: Some(1.0 + next() * 6.0),
+                half_angle: Some(0.2 + next() * 1.5),
+            };
+            let x = [(next() - 0.5) * 14.0, (next() - 0.5) * 14.0];
+            let spread = next() * 3.0;
+            let c = (next() - 0.5) * spread;
+            let p = [spread, c, c, spread + next()];
+            let whole = in_view_probability(&x, &p, 2, &view, None).unwrap();
+            // levels at the whole sum and next to it, as well as the usual half
+            let levels = [0.5, whole, f64::from_bits(whole.to_bits() + 1), next()];
+            for level in levels {
+                let reached = in_view_reaches(&x, &p, 2, &view, level).unwrap();
+                assert_eq!(reached, whole >= level, "case {case}, level {level}");
+                if reached {
+                    yes += 1
+                } else {
+                    no += 1
+                }
+            }
+        }
+        assert!(yes > 10_000 && no > 10_000, "{yes} reached, {no} not");
+    }
 
     #[test]
     fn survive_without_rates_keeps_existence() {

@@ -582,8 +582,7 @@ impl Filter {
             clusters = self.undetected(clusters, &by_key, &table)?;
             // an object the view did not hold had no chance to be detected again
             for (i, row) in predicted.rows.iter().enumerate() {
-                let held = predicted.in_view(i, &view.view, None)?;
-                if held < 0.5 {
+                if !predicted.in_view_reaches(i, &view.view, 0.5)? {
                     out_of_view.insert(row.version.lineage);
                 }
             }

@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use crate::error::KernelResult;
 use crate::filters::batched;
-use crate::mhf::existence::{in_view_probability, View};
+use crate::mhf::existence::{in_view_probability, in_view_reaches, View};
 use crate::mhf::state::{FilterState, Version};
 use crate::mhf::tables::Tables;
 
@@ -106,6 +106,12 @@ impl Predicted {
     /// eroded by `margin` (m) if given.
     pub fn in_view(&self, i: usize, view: &View, margin: Option<f64>) -> KernelResult<f64> {
         in_view_probability(self.position(i), self.covariance(i), self.dim, view, margin)
+    }
+
+    /// Whether row `i` lies in `view` with probability `level` or more
+    /// (`in_view(i, view, None) >= level`, [`in_view_reaches`]).
+    pub fn in_view_reaches(&self, i: usize, view: &View, level: f64) -> KernelResult<bool> {
+        in_view_reaches(self.position(i), self.covariance(i), self.dim, view, level)
     }
 
     /// Row `i`'s predicted velocity (`d`): its combined mean's entries after the
