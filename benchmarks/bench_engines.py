@@ -12,6 +12,8 @@ For each case, both engines run the same scans in the same process, interleaved
   the ``paper`` association model, the world asked for after each scan at its time:
   CPU µs per detection of the ingest calls and µs per ``world()`` call (best of the
   repeats);
+* paper 004's negative information: leftbehind (200 s) with its sensor views beside
+  the same scans without them, CPU µs per detection and per call (best of the repeats);
 * the kernels alone: one ``ClassFilter.predict`` and one ``update`` of N objects
   (robocup.yaml's ``Robot``, a 2-mode IMM with a transition period, 2-D) for N = 1,
   10, 100, 1,000: µs per call (best of ``--repeats`` loops), what crossing to Rust
@@ -271,6 +273,59 @@ def queries(repeats: int, engines: tuple[Engine, ...]) -> list[dict[str, Any]]:
             }
         )
     return rows
+
+
+class _Counted:
+    """A world model whose ``ingest`` calls are counted."""
+
+    def __init__(self, model: WorldModel) -> None:
+        self.model = model
+        self.calls = 0
+
+    def ingest(self, *args: Any, **kwargs: Any) -> Any:
+        self.calls += 1
+        return self.model.ingest(*args, **kwargs)
+
+
+def views(repeats: int, engines: tuple[Engine, ...]) -> dict[str, Any]:
+    """Paper 004's negative information: leftbehind (200 s, seed 0) with its robot's and
+    its fixed camera's sensor views (``SensorViews``: each scan with its sensor report,
+    the empty ones posted too), beside the same scans without them. CPU µs per detection
+    and per ``ingest`` call, the best of ``repeats`` runs, the engines in turn."""
+    scenario = make_scenario("leftbehind", 0, poses=True)
+    knowledge = _scenario_knowledge(scenario, None)
+    all_scans = list(scans(scenario.detections))
+    detections = sum(len(scan) for scan in all_scans)
+    best: dict[str, dict[str, float]] = {}
+    calls: dict[bool, int] = {}
+    for _ in range(repeats):
+        for engine in engines:
+            for with_views in (False, True):
+                model = _Counted(WorldModel(knowledge, engine=engine, reorder_window=0.0))
+                feed: Any = SensorViews(model, scenario) if with_views else model
+                start = time.process_time()
+                for scan in all_scans:
+                    feed.ingest(scan)
+                spent = time.process_time() - start
+                key = "views" if with_views else "plain"
+                row = best.setdefault(engine, {})
+                row[key] = min(row.get(key, math.inf), spent)
+                calls[with_views] = model.calls
+    return {
+        "case": "leftbehind 200 s",
+        "detections": detections,
+        "calls": {"plain": calls[False], "views": calls[True]},
+        **{
+            engine: {
+                key: {
+                    "us_per_detection": 1e6 * seconds / detections,
+                    "us_per_call": 1e6 * seconds / calls[key == "views"],
+                }
+                for key, seconds in row.items()
+            }
+            for engine, row in best.items()
+        },
+    }
 
 
 KERNEL_SIZES = (1, 10, 100, 1000)
@@ -834,6 +889,7 @@ def run(quick: bool, repeats: int, seeds: int) -> dict[str, Any]:
         "repeats": repeats,
         "cases": cases,
         "queries": queries(repeats, engines),
+        "views": views(repeats, engines),
         "kernels": kernels(repeats, engines),
         "existence_kernels": existence_kernels(repeats, engines),
         "filter_share_robocup": filter_share(engines),
@@ -896,6 +952,27 @@ def markdown(doc: dict[str, Any]) -> str:
             f"| {fmt(r['ingest_us_per_detection'])} | {fmt(p['us_per_query'])} "
             f"| {fmt(r['us_per_query'])} | {p['us_per_query'] / r['us_per_query']:.1f}x |"
         )
+    seen = doc.get("views")
+    if seen is not None:
+        lines += [
+            "",
+            f"Paper 004's negative information: {seen['case']} (seed 0, "
+            f"{seen['detections']} detections) with its robot's and fixed camera's sensor "
+            f"views ({seen['calls']['views']} ingest calls: each scan with its sensor report, "
+            f"the empty ones too) beside the same scans without them "
+            f"({seen['calls']['plain']} calls), CPU µs, best of the repeats:",
+            "",
+            "| engine | per detection, no views | per detection, views | per call, views "
+            "| views / no views |",
+            "|---|---|---|---|---|",
+        ]
+        for engine in ENGINES:
+            row = seen[engine]
+            lines.append(
+                f"| {engine} | {fmt(row['plain']['us_per_detection'])} "
+                f"| {fmt(row['views']['us_per_detection'])} | {fmt(row['views']['us_per_call'])} "
+                f"| {row['views']['us_per_detection'] / row['plain']['us_per_detection']:.2f}x |"
+            )
     lines += [
         "",
         "The kernels alone, µs per call (robocup's Robot: IMM, 2 modes, 4 states, 2-D):",
