@@ -1142,6 +1142,94 @@ def markdown(doc: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def figure(doc: dict[str, Any], path: Path) -> None:
+    """``doc``'s run drawn (``speed.png`` beside the results): CPU per detection of the
+    three trackers on the room and RoboCup, log scale, with 100x JPDA marked; the long
+    match's cost per detection by quarter with the Rust engine at each length; and the 8 s
+    match's versions in play by quarter beside the core's cost per version in play."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    results = doc["results"]
+    trackers = [
+        ("python", "Python engine", "tab:blue"),
+        ("rust", "Rust engine", "tab:orange"),
+        (JPDA, "Stone Soup JPDA", "tab:gray"),
+    ]
+    fig, (bars, long, per_version) = plt.subplots(1, 3, figsize=(15, 4.6))
+    cases = [("sim2", "the room (sim2)"), ("robocup", "RoboCup 2 s")]
+    width = 0.26
+    for k, (label, name, colour) in enumerate(trackers):
+        values = [results[label][key]["cpu_us_per_detection"] for key, _ in cases]
+        xs = [i + (k - 1) * width for i in range(len(cases))]
+        bars.bar(xs, values, width, label=name, color=colour)
+        for x, value in zip(xs, values, strict=True):
+            text = f"{value:,.0f}" if value >= 100 else f"{value:.3g}"
+            bars.text(x, value * 1.12, text, ha="center", fontsize=8)
+    for i, (key, _) in enumerate(cases):
+        target = results[JPDA][key]["cpu_us_per_detection"] / 100.0
+        bars.hlines(
+            target,
+            i - 1.6 * width,
+            i + 1.6 * width,
+            colors="tab:red",
+            linestyles="--",
+            label="target: JPDA / 100" if i == 0 else None,
+        )
+    bars.set_yscale("log")
+    highest = max(
+        results[label][key]["cpu_us_per_detection"] for label, _, _ in trackers for key, _ in cases
+    )
+    bars.set_ylim(top=highest * 12)  # room for the legend above the bars
+    bars.set_xticks(range(len(cases)), [name for _, name in cases])
+    bars.set_xlim(-0.6, len(cases) - 0.1)
+    bars.set_ylabel("CPU µs per detection (log scale)")
+    bars.set_title("Per detection, side by side")
+    bars.legend(fontsize=8, loc="upper left")
+
+    quarters = [1, 2, 3, 4]
+    long_name = doc["sizes"]["long"]["duration"]
+    runs = [(long_name, results["rust"]["long"]["quarters_cpu_us_per_detection"])]
+    runs += [
+        (row["duration"], row["quarters_cpu_us_per_detection"])
+        for row in doc.get("longer", [])
+        if row["engine"] == "rust"
+    ]
+    for duration, values in runs:
+        long.plot(quarters, values, marker="o", label=f"{duration:g} s match")
+    long.set_xticks(quarters, [f"Q{q}" for q in quarters])
+    long.set_ylim(bottom=0)
+    long.set_ylabel("CPU µs per detection")
+    long.set_title("RoboCup, the Rust engine, by quarter of the match")
+    long.legend(fontsize=8)
+
+    split = next((row for row in doc.get("long_split", []) if row["engine"] == "rust"), None)
+    if split is not None:
+        versions = [q["versions_mean"] for q in split["quarters"]]
+        core = [q["us_per_detection"]["core"] for q in split["quarters"]]
+        per_version.bar(quarters, versions, color="tab:green", alpha=0.5)
+        per_version.set_ylabel("object versions stored (mean)", color="tab:green")
+        per_version.set_xticks(quarters, [f"Q{q}" for q in quarters])
+        cost = per_version.twinx()
+        cost.plot(quarters, [c / v for c, v in zip(core, versions, strict=True)], "o-", color="k")
+        cost.set_ylim(bottom=0)
+        cost.set_ylabel("core µs per detection per version stored")
+        per_version.set_title(f"{long_name:g} s match: the scene's load, the cost per version")
+    machine = doc["machine"]
+    started = machine["started"][:16].replace("T", " ")
+    fig.suptitle(
+        f"bench_speed, {started} UTC, {machine.get('cpu_count', '?')} cores, "
+        f"best of {doc['repeats']} interleaved runs",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    print(f"wrote {path}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
@@ -1157,9 +1245,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     repeats = args.repeats if args.repeats is not None else (1 if args.quick else 3)
     doc = run(args.quick, repeats)
-    write_results(
+    target = write_results(
         RESULTS, "speed", doc, markdown(doc), args.quick, update_results=args.update_results
     )
+    figure(doc, target / ("speed_quick.png" if args.quick else "speed.png"))
     return 0
 
 
