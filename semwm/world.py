@@ -136,6 +136,18 @@ _new_tuple = tuple.__new__
 the one-scan path makes its :class:`_LoggedScan` so, in half the time."""
 
 
+class _Asked(NamedTuple):
+    """What a query (:meth:`WorldModel.world`) asks of its objects beyond its time,
+    checked: at least ``floor`` likely to exist, of class ``cls`` or below, within
+    ``near``'s radius, carrying ``label``, in one of the confidence ``states``."""
+
+    floor: float
+    cls: str | None
+    near: Sequence[float] | None
+    label: str | None
+    states: set[str] | None
+
+
 class _Marginal(NamedTuple):
     """What the whole hypothesis set says of one object (lineage) at a time: its
     existence probability (the sum over hypotheses of p(h) times the existence of
@@ -1758,14 +1770,16 @@ class WorldModel:
             and state.engine is core
             and type(self._state) is CoreState
         ):
-            floor = floor if self._mhf.mht else 0.0  # paper: the best hypothesis's objects
-            found = self._core_world(state, book, at, floor, cls, near, label, states)
+            # paper: the best hypothesis's objects, whatever their existence
+            floor = floor if self._mhf.mht else 0.0
+            found = self._core_world(state, book, at, _Asked(floor, cls, near, label, states))
             return WorldState(time=at, objects=tuple(_unique_labels(found)))
+        asked = _Asked(floor, cls, near, label, states)
         if len(state.tracks) <= _UNPAUSED_QUERY:
-            found = self._spec_world(state, book, at, floor, cls, near, label, states)
+            found = self._spec_world(state, book, at, asked)
         else:
             with collector_paused():  # many objects made, none in a cycle
-                found = self._spec_world(state, book, at, floor, cls, near, label, states)
+                found = self._spec_world(state, book, at, asked)
         return WorldState(time=at, objects=tuple(_unique_labels(found)))
 
     def _spec_world(
@@ -1773,14 +1787,11 @@ class WorldModel:
         state: StateView,
         book: BookView,
         at: float,
-        floor: float,
-        cls: str | None,
-        near: Sequence[float] | None,
-        label: str | None,
-        states: set[str] | None,
+        asked: _Asked,
     ) -> list[WorldObject]:
         """:meth:`world`'s objects from the state's Python values (the Python engine's
         path, the specification of :meth:`_core_world`), in id order."""
+        floor, cls, near, label, states = asked
         dim = self._knowledge.world.dimension
         marginals, predicted = self._marginals(at, state)
         if self._mhf.mht:
@@ -1833,11 +1844,7 @@ class WorldModel:
         state: CoreState,
         book: BookView,
         at: float,
-        floor: float,
-        cls: str | None,
-        near: Sequence[float] | None,
-        label: str | None,
-        states: set[str] | None,
+        asked: _Asked,
     ) -> list[WorldObject]:
         """:meth:`world`'s objects, their marginals, the most probable version of each
         and its prediction to ``at`` made in the core (``Engine.world_at``:
@@ -1847,23 +1854,20 @@ class WorldModel:
         assert core is not None and isinstance(self._state, CoreState)
         rows = core.engine.world_at(state, self._state, at, self._published, self._ids)
         if len(rows) <= _UNPAUSED_QUERY:
-            return self._core_objects(rows, book, at, floor, cls, near, label, states)
+            return self._core_objects(rows, book, at, asked)
         with collector_paused():  # many objects made, none in a cycle
-            return self._core_objects(rows, book, at, floor, cls, near, label, states)
+            return self._core_objects(rows, book, at, asked)
 
     def _core_objects(
         self,
         rows: list[tuple[Any, ...]],
         book: BookView,
         at: float,
-        floor: float,
-        cls: str | None,
-        near: Sequence[float] | None,
-        label: str | None,
-        states: set[str] | None,
+        asked: _Asked,
     ) -> list[WorldObject]:
         """:meth:`_core_world`'s objects of the core's rows (``Engine.world_at``), in id
         order."""
+        floor, cls, near, label, states = asked
         covered = self.taxonomy.covers(cls) if cls is not None else None
         dim = self._knowledge.world.dimension
         objects = []

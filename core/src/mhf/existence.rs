@@ -476,6 +476,16 @@ fn in_view_sum(
 mod tests {
     use super::*;
 
+    /// Uniform numbers in `[0, 1)` from `seed` (xorshift64): the tests' random cases.
+    fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
     /// `in_view_probability` as it was written first: every point's bearing by `atan2`,
     /// the reference the shortcuts must equal bit for bit.
     fn in_view_by_bearings(
@@ -525,15 +535,9 @@ mod tests {
 
     #[test]
     fn in_view_equals_the_bearings_everywhere_and_at_the_edges() {
-        // xorshift: random views and estimates, many of them with a point on a view's
-        // edge (the estimate's mean placed on it, a point variance of 0)
-        let mut seed: u64 = 0x9E37_79B9_7F4A_7C15;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        // random views and estimates, many of them with a point on a view's edge (the
+        // estimate's mean placed on it, a point variance of 0)
+        let mut next = uniform(0x9E37_79B9_7F4A_7C15);
         let mut checked = 0;
         let mut partly = 0;
         for case in 0..20_000 {
@@ -616,13 +620,7 @@ mod tests {
 
     #[test]
     fn in_view_reaches_answers_as_the_whole_sum_compares() {
-        let mut seed: u64 = 0x2545_F491_4F6C_DD1D;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = uniform(0x2545_F491_4F6C_DD1D);
         let (mut yes, mut no) = (0, 0);
         for case in 0..20_000 {
             let view = View {
