@@ -37,8 +37,9 @@ pub struct Book {
 /// Each lineage's version in the most probable hypothesis that holds it
 /// (`representatives`), in the order the specification meets them.
 pub fn representatives(state: &State) -> Vec<(u64, Arc<Version>)> {
-    let mut chosen: Vec<(u64, Arc<Version>)> = Vec::new();
-    let mut known: KeySet<u64> = KeySet::default();
+    let mut chosen: Vec<(u64, Arc<Version>)> = Vec::with_capacity(state.tracks.len());
+    let mut known: KeySet<u64> =
+        KeySet::with_capacity_and_hasher(state.tracks.len(), Default::default());
     let version = |key: &u64| &state.tracks[key].version;
     for cluster in &state.clusters {
         if cluster.hypotheses.len() == 1 {
@@ -50,12 +51,15 @@ pub fn representatives(state: &State) -> Vec<(u64, Arc<Version>)> {
             }
             continue;
         }
-        let mut pending: KeySet<u64> = cluster
-            .keys
-            .iter()
-            .map(|key| version(key).lineage)
-            .filter(|lineage| !known.contains(lineage))
-            .collect();
+        let mut pending: KeySet<u64> =
+            KeySet::with_capacity_and_hasher(cluster.keys.len(), Default::default());
+        pending.extend(
+            cluster
+                .keys
+                .iter()
+                .map(|key| version(key).lineage)
+                .filter(|lineage| !known.contains(lineage)),
+        );
         for h in &cluster.hypotheses {
             for key in &h.keys {
                 let v = version(key);
@@ -127,7 +131,8 @@ pub fn advance(
     if let Some(source) = source {
         scans.insert(source.clone(), time);
     }
-    let mut values: KeyMap<u64, (f64, f64)> = KeyMap::default();
+    let mut values: KeyMap<u64, (f64, f64)> =
+        KeyMap::with_capacity_and_hasher(chosen.len(), Default::default());
     for (lineage, version) in &chosen {
         let spec = &tables.classes[version.cls];
         let entry = book.values.get(lineage);

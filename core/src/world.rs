@@ -146,52 +146,62 @@ pub fn coinciding(delta: &[f64], pa: &[f64], pb: &[f64], d: usize) -> bool {
 /// least `floor`), not a stale one that left the region long ago; else its first.
 struct LineageTotals {
     floor: f64,
-    totals: Vec<(u64, f64)>,
+    /// In order of first appearance: the lineage, its total, the version shown and
+    /// whether that version is one in which it is present.
+    totals: Vec<LineageTotal>,
+    /// Each lineage's row in `totals`.
     at: KeyMap<u64, usize>,
-    chosen: KeyMap<u64, Key>,
-    present_in: KeySet<u64>,
+}
+
+struct LineageTotal {
+    lineage: u64,
+    total: f64,
+    shown: Key,
+    present: bool,
 }
 
 impl LineageTotals {
     /// Room for `lineages` without growing.
     fn new(floor: f64, lineages: usize) -> LineageTotals {
-        let mut at = KeyMap::default();
-        at.reserve(lineages);
-        let mut chosen = KeyMap::default();
-        chosen.reserve(lineages);
-        let mut present_in = KeySet::default();
-        present_in.reserve(lineages);
         LineageTotals {
             floor,
             totals: Vec::with_capacity(lineages),
-            at,
-            chosen,
-            present_in,
+            at: KeyMap::with_capacity_and_hasher(lineages, Default::default()),
         }
     }
 
     /// Version `key` of `lineage`, of probability mass `p`, present (existence times
     /// the probability of being in the region) with `present`.
     fn add(&mut self, lineage: u64, key: Key, p: f64, present: f64) {
-        match self.at.get(&lineage) {
-            Some(&i) => self.totals[i].1 += p * present,
-            None => {
-                self.at.insert(lineage, self.totals.len());
-                self.totals.push((lineage, 0.0 + p * present));
+        let row = match self.at.get(&lineage) {
+            Some(&i) => {
+                let row = &mut self.totals[i];
+                row.total += p * present;
+                row
             }
+            None => {
+                let i = self.totals.len();
+                self.at.insert(lineage, i);
+                self.totals.push(LineageTotal {
+                    lineage,
+                    total: 0.0 + p * present,
+                    shown: key,
+                    present: false,
+                });
+                &mut self.totals[i]
+            }
+        };
+        if present >= self.floor && !row.present {
+            row.present = true;
+            row.shown = key;
         }
-        if present >= self.floor && !self.present_in.contains(&lineage) {
-            self.present_in.insert(lineage);
-            self.chosen.insert(lineage, key);
-        }
-        self.chosen.entry(lineage).or_insert(key);
     }
 
     /// `(lineage, total, key shown)` in order of first appearance.
     fn rows(&self) -> impl Iterator<Item = (u64, f64, Key)> + '_ {
         self.totals
             .iter()
-            .map(|&(lineage, total)| (lineage, total, self.chosen[&lineage]))
+            .map(|row| (row.lineage, row.total, row.shown))
     }
 }
 
@@ -234,24 +244,18 @@ pub fn current(
     let floor = tables.min_existence;
     // sized once: at most one entry per stored version (no rehash as they fill)
     let versions = state.tracks.len();
-    let mut summaries: KeyMap<Key, Arc<Summary>> = KeyMap::default();
-    summaries.reserve(versions);
-    let mut kept: Summaries = KeyMap::default();
-    kept.reserve(versions);
+    // each version's summary by its serial (one per stored version), the cache after
+    let mut kept: Summaries = KeyMap::with_capacity_and_hasher(versions, Default::default());
     let mut totals = LineageTotals::new(floor, versions);
     // version `key` of probability mass `p`, added to its lineage's total
     let mut add = |key: Key, p: f64| {
         let entry = &state.tracks[&key];
         let lineage = entry.version.lineage;
-        let inside = summaries
-            .entry(key)
-            .or_insert_with(|| {
-                let made = match cache.get(&entry.serial) {
-                    Some(made) => made.clone(),
-                    None => Arc::new(summary(&entry.version, tables)),
-                };
-                kept.insert(entry.serial, made.clone());
-                made
+        let inside = kept
+            .entry(entry.serial)
+            .or_insert_with(|| match cache.get(&entry.serial) {
+                Some(made) => made.clone(),
+                None => Arc::new(summary(&entry.version, tables)),
             })
             .inside;
         totals.add(lineage, key, p, entry.existence * inside);
@@ -298,7 +302,7 @@ pub fn current(
     let points: Vec<(&[f64], &[f64])> = marginals
         .iter()
         .map(|m| {
-            let summary = &summaries[&m.key];
+            let summary = &cache[&state.tracks[&m.key].serial];
             (&summary.position[..], &summary.covariance[..])
         })
         .collect();
@@ -313,11 +317,19 @@ pub fn current(
 /// The keys of the most probable hypothesis (`MHFState.best`: the best of every
 /// cluster).
 pub fn best_keys(state: &State) -> KeySet<Key> {
-    state
+    let held = state
         .clusters
         .iter()
-        .flat_map(|c| c.hypotheses[0].keys.iter().copied())
-        .collect()
+        .map(|c| c.hypotheses[0].keys.len())
+        .sum();
+    let mut best = KeySet::with_capacity_and_hasher(held, Default::default());
+    best.extend(
+        state
+            .clusters
+            .iter()
+            .flat_map(|c| c.hypotheses[0].keys.iter().copied()),
+    );
+    best
 }
 
 /// One entry per physical object (`WorldModel._same_objects`): see the module docs.

@@ -756,8 +756,17 @@ impl Filter {
                 *labels.entry(l.clone()).or_insert(next)
             })
         };
-        let mut fresh: KeySet<Key> =
-            KeySet::with_capacity_and_hasher(options.len(), Default::default());
+        // the versions the options add to the table (updates, settled, new), room made once
+        let adding: usize = options
+            .iter()
+            .map(|option| match option {
+                ScanOption::Settled { .. } => 1,
+                ScanOption::Detection(option) => option.existing.len() + 1,
+            })
+            .sum();
+        table.versions.reserve(adding);
+        table.existence.reserve(adding);
+        let mut fresh: KeySet<Key> = KeySet::with_capacity_and_hasher(adding, Default::default());
         let mut new_versions: KeyMap<Key, Arc<Version>> =
             KeyMap::with_capacity_and_hasher(options.len(), Default::default());
         let mut scan_options = Vec::with_capacity(options.len());

@@ -160,6 +160,30 @@ fn no_class() -> Name {
     NO_CLASS.clone()
 }
 
+/// The lineages a detector reported in a scan, asked for membership: by looking at each
+/// when they are few (a scan's usual one or two), by a set when they are many.
+struct Members<'a> {
+    list: &'a [u64],
+    set: Option<KeySet<u64>>,
+}
+
+impl<'a> Members<'a> {
+    /// Above this many lineages a set answers.
+    const LOOKED_AT: usize = 16;
+
+    fn of(list: &'a [u64]) -> Members<'a> {
+        let set = (list.len() > Self::LOOKED_AT).then(|| list.iter().copied().collect());
+        Members { list, set }
+    }
+
+    fn contains(&self, lineage: &u64) -> bool {
+        match &self.set {
+            Some(set) => set.contains(lineage),
+            None => self.list.contains(lineage),
+        }
+    }
+}
+
 impl ObservedRates {
     /// `g`: the stream's observed rate per object of class `cls` in view (Hz); 0 until
     /// its source has scanned twice. `class_rate`: the class's knowledge rate, the
@@ -393,14 +417,9 @@ impl ObservedRates {
             let (_, detector, cls) = &key;
             let old = streams.get(&key).cloned().unwrap_or_default();
             // a hit is any detection of the object by the stream, whatever class it now has
-            let every: KeySet<u64> = scan
-                .detected
-                .get(detector)
-                .unwrap_or(&nothing)
-                .iter()
-                .copied()
-                .collect();
+            let every = Members::of(scan.detected.get(detector).unwrap_or(&nothing));
             let now: BTreeSet<u64> = every
+                .list
                 .iter()
                 .copied()
                 .filter(|&lineage| class_of(lineage) == *cls)
@@ -426,12 +445,20 @@ impl ObservedRates {
             );
         }
 
-        let mut seen: KeyMap<u64, Arc<Seen>> = self
-            .seen
-            .iter()
-            .filter(|(lineage, _)| scan.alive.contains(lineage))
-            .map(|(lineage, streams)| (*lineage, streams.clone()))
-            .collect();
+        // room for every lineage kept and every one the scan detected, without growing
+        let reported = [&scan.detected, &scan.born, &scan.born_elsewhere]
+            .into_iter()
+            .flat_map(|by| by.values())
+            .map(Vec::len)
+            .sum::<usize>();
+        let mut seen: KeyMap<u64, Arc<Seen>> =
+            KeyMap::with_capacity_and_hasher(self.seen.len() + reported, Default::default());
+        seen.extend(
+            self.seen
+                .iter()
+                .filter(|(lineage, _)| scan.alive.contains(lineage))
+                .map(|(lineage, streams)| (*lineage, streams.clone())),
+        );
         let detectors: BTreeSet<&Name> = scan
             .detected
             .keys()
@@ -460,7 +487,11 @@ impl ObservedRates {
         }
 
         let mut alarms = self.false_alarms.clone();
-        let confirmed: KeySet<u64> = scan.detected.values().flatten().copied().collect();
+        let mut confirmed: KeySet<u64> = KeySet::with_capacity_and_hasher(
+            scan.detected.values().map(Vec::len).sum(),
+            Default::default(),
+        );
+        confirmed.extend(scan.detected.values().flatten().copied());
         for detector in &detectors {
             alarms
                 .entry((source.clone(), (*detector).clone()))
