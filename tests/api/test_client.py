@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -77,6 +78,26 @@ def test_a_token_is_sent_and_a_bad_url_is_refused(knowledge_file: Path) -> None:
             assert client.post_detections([cup(1.0)])["applied"] == 1
     with pytest.raises(ValueError, match="base_url"):
         Client("127.0.0.1:8000")
+
+
+def test_an_answer_is_read_as_the_standard_library_reads_it() -> None:
+    """The client reads answers with orjson, and those orjson refuses with the standard
+    library: NaN and infinities, integers beyond 64 bits; a body that is no JSON raises
+    the standard library's error, as before."""
+    import json
+
+    from semwm.client import decode_json
+
+    world = b'{"objects":[{"id":1,"position":[0.1,-2.5e-3],"existence":0.9999999999999999}]}'
+    assert decode_json(world) == json.loads(world)
+    assert repr(decode_json(b"[0.1, 1e-320, 1.7976931348623157e308]")) == repr(
+        json.loads(b"[0.1, 1e-320, 1.7976931348623157e308]")
+    )
+    nan = decode_json(b'{"x": NaN, "y": -Infinity}')
+    assert math.isnan(nan["x"]) and nan["y"] == -math.inf
+    assert decode_json(b'{"n": %d}' % 2**70) == {"n": 2**70}
+    with pytest.raises(json.JSONDecodeError):
+        decode_json(b"<html>bad gateway</html>")
 
 
 def test_a_batch_is_sent_as_the_robot_gave_it_bad_values_included(knowledge_file: Path) -> None:
