@@ -23,6 +23,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
+use litemap::LiteMap;
+
 use crate::error::{KernelError, KernelResult};
 use crate::mhf::association::{self, Inputs, ScanOption};
 use crate::mhf::coverage::symmetric_eigen;
@@ -981,7 +983,7 @@ impl Filter {
                 }
             }
         }
-        let by_name = |lists: Vec<Vec<u64>>| -> BTreeMap<Name, Vec<u64>> {
+        let by_name = |lists: Vec<Vec<u64>>| -> LiteMap<Name, Vec<u64>> {
             lists
                 .into_iter()
                 .enumerate()

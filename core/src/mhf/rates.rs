@@ -25,6 +25,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Arc, LazyLock};
 
+use litemap::LiteMap;
+
 use crate::mhf::hypotheses::{KeyMap, KeySet};
 
 /// Strength (pseudo-counts) of the prior of a stream's per-scan detection probability.
@@ -124,9 +126,9 @@ pub struct ScanReport {
     pub time: f64,
     /// Per detector, the lineages that existed before the scan whose version in the most
     /// probable hypothesis took one of its detections.
-    pub detected: BTreeMap<Name, Vec<u64>>,
+    pub detected: LiteMap<Name, Vec<u64>>,
     /// Per detector, the new lineages it started in the most probable hypothesis.
-    pub born: BTreeMap<Name, Vec<u64>>,
+    pub born: LiteMap<Name, Vec<u64>>,
     /// Every lineage the state holds after the scan.
     pub alive: KeySet<u64>,
     /// Where the source's sensor was.
@@ -134,7 +136,7 @@ pub struct ScanReport {
     /// The class of each lineage detected or started (`None`: one count for all).
     pub classes: Option<KeyMap<u64, Name>>,
     /// Per detector, new lineages it started in other hypotheses only.
-    pub born_elsewhere: BTreeMap<Name, Vec<u64>>,
+    pub born_elsewhere: LiteMap<Name, Vec<u64>>,
     /// The detectors that made the scan (`None`: every detector of the source).
     pub scanned: Option<BTreeSet<Name>>,
     /// Lineages the scan's sensor view did not hold.
@@ -144,10 +146,10 @@ pub struct ScanReport {
 /// The observed rates of one state (`ObservedRates` in the specification).
 #[derive(Debug, Clone, Default)]
 pub struct ObservedRates {
-    pub sources: BTreeMap<Name, SourceClock>,
-    pub streams: BTreeMap<CountKey, StreamCounts>,
+    pub sources: LiteMap<Name, SourceClock>,
+    pub streams: LiteMap<CountKey, StreamCounts>,
     pub seen: KeyMap<u64, Arc<Seen>>,
-    pub false_alarms: BTreeMap<StreamKey, FalseAlarms>,
+    pub false_alarms: LiteMap<StreamKey, FalseAlarms>,
 }
 
 fn name(text: &str) -> Name {
@@ -393,7 +395,8 @@ impl ObservedRates {
                 .unwrap_or_else(no_class)
         };
         let mut streams = self.streams.clone();
-        let mut keys: BTreeSet<CountKey> = streams
+        // the streams the scan counts for, in key order, each once
+        let mut keys: Vec<CountKey> = streams
             .keys()
             .filter(|(s, d, _)| {
                 s == source && scan.scanned.as_ref().is_none_or(|used| used.contains(d))
@@ -408,14 +411,15 @@ impl ObservedRates {
                 if last.as_ref().is_some_and(|known| Arc::ptr_eq(known, &cls)) {
                     continue; // the same name: the key is in
                 }
-                keys.insert((source.clone(), detector.clone(), cls.clone()));
+                keys.push((source.clone(), detector.clone(), cls.clone()));
                 last = Some(cls);
             }
         }
+        keys.sort_unstable();
+        keys.dedup();
         let nothing = Vec::new();
         for key in keys {
             let (_, detector, cls) = &key;
-            let old = streams.get(&key).cloned().unwrap_or_default();
             // a hit is any detection of the object by the stream, whatever class it now has
             let every = Members::of(scan.detected.get(detector).unwrap_or(&nothing));
             let now: BTreeSet<u64> = every
@@ -424,22 +428,26 @@ impl ObservedRates {
                 .copied()
                 .filter(|&lineage| class_of(lineage) == *cls)
                 .collect();
-            let expected: Vec<u64> = old
-                .detected
-                .iter()
-                .copied()
-                .filter(|lineage| {
-                    scan.alive.contains(lineage) && !scan.out_of_view.contains(lineage)
-                })
-                .collect();
-            let chances = expected.len();
-            let hits = expected.iter().filter(|l| every.contains(l)).count();
+            let old = streams.get(&key);
+            if now.is_empty() && old.is_some_and(|old| old.detected.is_empty()) {
+                // no lineage to expect, none detected: its counts stay as they are
+                // (discounted by DISCOUNT^0 = 1, plus nothing)
+                continue;
+            }
+            let (mut chances, mut hits) = (0usize, 0usize);
+            for lineage in old.iter().flat_map(|old| old.detected.iter()) {
+                if scan.alive.contains(lineage) && !scan.out_of_view.contains(lineage) {
+                    chances += 1;
+                    hits += usize::from(every.contains(lineage));
+                }
+            }
+            let (old_hits, old_expected) = old.map_or((0.0, 0.0), |old| (old.hits, old.expected));
             let kept = DISCOUNT.powf(chances as f64); // forget by evidence, not by time
             streams.insert(
                 key,
                 StreamCounts {
-                    hits: kept * old.hits + hits as f64,
-                    expected: kept * old.expected + chances as f64,
+                    hits: kept * old_hits + hits as f64,
+                    expected: kept * old_expected + chances as f64,
                     detected: Arc::new(now), // a lineage counts once confirmed
                 },
             );
@@ -459,12 +467,14 @@ impl ObservedRates {
                 .filter(|(lineage, _)| scan.alive.contains(lineage))
                 .map(|(lineage, streams)| (*lineage, streams.clone())),
         );
-        let detectors: BTreeSet<&Name> = scan
+        let mut detectors: Vec<&Name> = scan
             .detected
             .keys()
             .chain(scan.born.keys())
             .chain(scan.born_elsewhere.keys())
             .collect();
+        detectors.sort_unstable();
+        detectors.dedup();
         for detector in &detectors {
             let stream: StreamKey = (source.clone(), (*detector).clone());
             let lineages = [&scan.detected, &scan.born, &scan.born_elsewhere]
@@ -627,8 +637,8 @@ mod tests {
         ScanReport {
             source: name("a"),
             time,
-            detected: BTreeMap::from([(name("cam"), lineages(detected))]),
-            born: BTreeMap::from([(name("cam"), lineages(born))]),
+            detected: LiteMap::from_iter([(name("cam"), lineages(detected))]),
+            born: LiteMap::from_iter([(name("cam"), lineages(born))]),
             alive: alive.iter().copied().collect(),
             ..ScanReport::default()
         }
@@ -644,7 +654,7 @@ mod tests {
         let counts = &rates.streams[&(name("a"), name("cam"), name(""))];
         assert!(counts.expected > 25.0 && counts.hits == counts.expected);
         let g = rates.rate("a", "cam", "", None);
-        let interval = rates.sources["a"].interval.unwrap();
+        let interval = rates.sources[&name("a")].interval.unwrap();
         assert!((interval - 0.1).abs() < 1e-9);
         let p = (counts.hits + PRIOR_COUNTS * 0.5) / (counts.expected + PRIOR_COUNTS);
         assert_eq!(g, p / interval);
@@ -685,8 +695,8 @@ mod tests {
         let turned = rates.after_scan(&away);
         assert_eq!(turned.streams[&key].expected, before);
         let mut other = scan(0.2, &[], &[], &[1]);
-        other.detected = BTreeMap::new();
-        other.born = BTreeMap::new();
+        other.detected = LiteMap::new();
+        other.born = LiteMap::new();
         other.scanned = Some(BTreeSet::from([name("laser")]));
         assert_eq!(rates.after_scan(&other).streams[&key].expected, before);
     }
