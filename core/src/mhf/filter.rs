@@ -613,7 +613,7 @@ impl Filter {
             }
         }
         let referenced = key_union(final_clusters.iter().map(|c| c.keys.as_slice()));
-        let mut tracks = BTreeMap::new();
+        let mut tracks = LiteMap::with_capacity(referenced.len());
         for key in &referenced {
             let version = table.version(*key)?.clone();
             let existence = table.existence.get(key).copied().unwrap_or(1.0);

@@ -7,9 +7,10 @@
 //! version and every cluster it did not change (`Arc`), so that the states the reorder
 //! window keeps cost only what changed, and a rejected batch leaves the state untouched.
 
-use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
+
+use litemap::LiteMap;
 
 use crate::mhf::hypotheses::Cluster;
 use crate::mhf::rates::{Name, ObservedRates};
@@ -111,7 +112,8 @@ pub fn next_serial() -> u64 {
 #[derive(Debug, Clone)]
 pub struct State {
     pub clusters: Vec<Arc<Cluster>>,
-    pub tracks: BTreeMap<Key, Entry>,
+    /// In key order: a sorted vector (built in order each scan, dropped as one block).
+    pub tracks: LiteMap<Key, Entry>,
     pub time: Option<f64>,
     pub next_key: Key,
     pub observed: Arc<ObservedRates>,
@@ -121,7 +123,7 @@ impl State {
     pub fn empty() -> State {
         State {
             clusters: Vec::new(),
-            tracks: BTreeMap::new(),
+            tracks: LiteMap::new(),
             time: None,
             next_key: 0,
             observed: Arc::new(ObservedRates::default()),

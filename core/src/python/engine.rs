@@ -8,9 +8,10 @@
 //! published world crosses as `VersionRef`s made here (`Engine.current`,
 //! `Engine.publish`, which also gives publishing's common case).
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
+use litemap::LiteMap;
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods,
 };
@@ -24,7 +25,7 @@ use crate::mhf::filter::Filter;
 use crate::mhf::hypotheses::{Cluster, Hypothesis, KeyMap, KeySet};
 use crate::mhf::measurement::{Measurement, SensorView};
 use crate::mhf::rates::Name;
-use crate::mhf::state::{next_serial, Entry, FilterState, State, Version};
+use crate::mhf::state::{next_serial, Entry, FilterState, Key, State, Version};
 use crate::mhf::tables::{Appearance, ClassSpec, DetectorSpec, LeaveRelation, Tables};
 use crate::python::published::{PyPublished, Row};
 use crate::python::rates::PyObservedRates;
@@ -1139,7 +1140,7 @@ impl PyState {
         next_key: u64,
         observed: &PyObservedRates,
     ) -> PyResult<Self> {
-        let mut tracks = BTreeMap::new();
+        let mut entries: Vec<(Key, Entry)> = Vec::with_capacity(versions.len());
         for row in versions {
             let ((key, lineage, cls, label), (modes, size, x, p, mu), times, rest) = row;
             let (time, last_seen, created, rate) = times;
@@ -1170,15 +1171,17 @@ impl PyState {
                 class_probs: class_probs.into(),
                 sources: sources.into(),
             };
-            tracks.insert(
+            entries.push((
                 key,
                 Entry {
                     version: Arc::new(version),
                     existence,
                     serial: next_serial(),
                 },
-            );
+            ));
         }
+        // in key order, the last row of a key kept (as inserting each in turn would)
+        let tracks: LiteMap<Key, Entry> = entries.into_iter().collect();
         let clusters = clusters
             .into_iter()
             .map(|hypotheses| {
