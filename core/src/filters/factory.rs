@@ -152,11 +152,12 @@ impl ClassTables {
         }
         let decaying = self.velocity_decay > 0.0 && n > self.dim;
         let mut t = [0.0; MAX_MODES * MAX_MODES];
-        let mut f = vec![0.0; m * nn];
-        let mut f_cov = vec![0.0; m * nn];
-        let mut q = vec![0.0; m * nn];
-        let mut x0 = vec![0.0; m * n];
-        let mut p0 = vec![0.0; m * nn];
+        // F, F for the covariance, Q, the mixed means and covariances: one block
+        let mut scratch = vec![0.0; 4 * m * nn + m * n];
+        let (f, rest) = scratch.split_at_mut(m * nn);
+        let (f_cov, rest) = rest.split_at_mut(m * nn);
+        let (q, rest) = rest.split_at_mut(m * nn);
+        let (p0, x0) = rest.split_at_mut(m * nn);
         let mut cbar = [0.0; MAX_MODES];
         // the step's transition and models, kept for the next row of the same step (the
         // rows a scan predicts mostly share a few steps); the decay rewrites F per row
@@ -170,28 +171,18 @@ impl ClassTables {
             let mui = &mut mu[i * m..(i + 1) * m];
             if decaying || made_for != Some(step) {
                 self.transition_for(step, &mut t[..m * m]);
-                self.mode_models(step, &mut f, &mut q);
+                self.mode_models(step, f, q);
                 made_for = Some(step);
             }
-            imm_mix(
-                xi,
-                pi,
-                mui,
-                &t[..m * m],
-                m,
-                n,
-                &mut x0,
-                &mut p0,
-                &mut cbar[..m],
-            );
+            imm_mix(xi, pi, mui, &t[..m * m], m, n, x0, p0, &mut cbar[..m]);
             if decaying {
-                self.decay(step, &x0, &p0, &mut f, &mut f_cov);
-                predict_decaying(&mut x0, &mut p0, &f, &f_cov, &q, m, n);
+                self.decay(step, x0, p0, f, f_cov);
+                predict_decaying(x0, p0, f, f_cov, q, m, n);
             } else {
-                predict_modes(&mut x0, &mut p0, &f, &q, m, n);
+                predict_modes(x0, p0, f, q, m, n);
             }
-            xi.copy_from_slice(&x0);
-            pi.copy_from_slice(&p0);
+            xi.copy_from_slice(x0);
+            pi.copy_from_slice(p0);
             mui.copy_from_slice(&cbar[..m]);
         }
         Ok(())

@@ -242,7 +242,8 @@ impl ObservedRates {
             return result;
         }
         // the first object of a (stream, class) sets its prior, as the specification's cache
-        let mut rates: BTreeMap<(&str, &str, &str), f64> = BTreeMap::new();
+        // (a few entries: a sorted vector, not a B-tree node of eleven)
+        let mut rates: LiteMap<(&str, &str, &str), f64> = LiteMap::new();
         for (i, lineage) in lineages.iter().enumerate() {
             let Some(streams) = self.seen.get(lineage) else {
                 continue;
@@ -281,7 +282,7 @@ impl ObservedRates {
             Some(clock) if clock.interval.is_some_and(|interval| interval != 0.0) => {}
             _ => return class_rates.to_vec(), // every g is 0 until the source scanned twice
         }
-        let mut by_class: BTreeMap<&str, f64> = BTreeMap::new();
+        let mut by_class: LiteMap<&str, f64> = LiteMap::new();
         let g: Vec<f64> = (0..lineages.len())
             .map(|i| {
                 let cls = classes.map_or("", |c| &**c[i]);

@@ -440,8 +440,10 @@ impl PyDetectionReader {
                                 key,
                                 bits,
                                 source: source.clone(),
-                                rows: Vec::new(),
-                                given: Vec::new(),
+                                // a batch of one detection (a robot's usual post)
+                                // holds one row; else the vector's first growth
+                                rows: Vec::with_capacity(batch.len().min(4)),
+                                given: Vec::with_capacity(batch.len().min(4)),
                             });
                             if !index.is_empty() {
                                 index.insert((bits, source.clone()), building.len() - 1);
