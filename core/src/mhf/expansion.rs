@@ -287,7 +287,8 @@ struct Book {
 
 impl Book {
     fn new(clusters: Vec<(usize, Arc<Cluster>)>, next: usize) -> Book {
-        let mut owner = KeyMap::default();
+        let held = clusters.iter().map(|(_, cluster)| cluster.keys.len()).sum();
+        let mut owner = KeyMap::with_capacity_and_hasher(held, Default::default());
         for (id, cluster) in &clusters {
             for &key in &cluster.keys {
                 owner.insert(key, *id);

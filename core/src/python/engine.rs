@@ -270,8 +270,9 @@ pub struct PyEngine {
     filter: Arc<Filter>,
     classes: HashMap<String, usize>,
     detectors: HashMap<String, usize>,
-    /// the class names as Python strings, by index (each `VersionRef` shares its class's)
-    names: Vec<Py<PyString>>,
+    /// the class names as Python strings, by index (each `VersionRef` shares its class's,
+    /// each scan's published table the list)
+    names: Arc<[Py<PyString>]>,
     /// the versions' summaries the last published world used (`world::Summaries`)
     summaries: Arc<Mutex<Summaries>>,
 }
@@ -485,7 +486,7 @@ impl PyEngine {
                 cls,
             })
             .collect();
-        let names = self.names.iter().map(|name| name.clone_ref(py)).collect();
+        let names = self.names.clone();
         let shown = Bound::new(py, PyPublished::new(shown, names, state.clone().unbind()))?;
         Ok((
             None,

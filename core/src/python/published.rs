@@ -8,6 +8,8 @@
 //! is made once, on the first read of a value (an object lost, the knowledge changed, a
 //! snapshot). It reads as that dict: a `Mapping`.
 
+use std::sync::Arc;
+
 use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
@@ -30,15 +32,15 @@ pub struct Row {
 #[pyclass(frozen, mapping, name = "Published", module = "semwm._core")]
 pub struct PyPublished {
     rows: Vec<Row>,
-    /// the class names by index (shared with the engine's)
-    names: Vec<Py<PyString>>,
+    /// the class names by index (the engine's list, shared)
+    names: Arc<[Py<PyString>]>,
     /// the `CoreState` holding the versions
     state: Py<PyAny>,
     made: PyOnceLock<Py<PyDict>>,
 }
 
 impl PyPublished {
-    pub fn new(rows: Vec<Row>, names: Vec<Py<PyString>>, state: Py<PyAny>) -> Self {
+    pub fn new(rows: Vec<Row>, names: Arc<[Py<PyString>]>, state: Py<PyAny>) -> Self {
         PyPublished {
             rows,
             names,
