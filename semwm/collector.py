@@ -15,7 +15,10 @@ the pause (about a microsecond) would cost more than the collections it defers.
 A query (:meth:`semwm.WorldModel.world`) of more than 64 objects makes their Python
 values with the collector paused too: each object is several containers, none in a
 cycle, and a query of 1,000 objects made without the pause set off collections that
-took half its time and, now and then, a full one of tens of milliseconds.
+took half its time and, now and then, a full one of tens of milliseconds. With the
+Rust engine that includes the core's rows (``Engine.world_at``: a row of Python values
+per object), for a state of more than 64 object versions. The client
+(:func:`semwm.client.decode_json`) reads an answer of more than 64 KiB paused as well.
 
 The collector is process-wide: the pause is counted, so that concurrent ingests
 (several models, several threads) resume it only when the last one ends, and only

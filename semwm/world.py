@@ -186,6 +186,7 @@ class _LoggedScan(NamedTuple):
 
 
 _log_key = attrgetter("key")
+_id_of = attrgetter("id")
 
 
 @dataclass(frozen=True)
@@ -1772,8 +1773,12 @@ class WorldModel:
         ):
             # paper: the best hypothesis's objects, whatever their existence
             floor = floor if self._mhf.mht else 0.0
-            found = self._core_world(state, book, at, _Asked(floor, cls, near, label, states))
-            return WorldState(time=at, objects=tuple(_unique_labels(found)))
+            asked = _new_tuple(_Asked, (floor, cls, near, label, states))  # _Asked(...)
+            found = self._core_world(state, book, at, asked)
+            # WorldState(time=at, objects=...), one per query
+            return made_without_init(
+                WorldState, {"time": at, "objects": tuple(_unique_labels(found))}
+            )
         asked = _Asked(floor, cls, near, label, states)
         if len(state.tracks) <= _UNPAUSED_QUERY:
             found = self._spec_world(state, book, at, asked)
@@ -1836,7 +1841,7 @@ class WorldModel:
             ):
                 continue
             objects.append(obj)
-        objects.sort(key=lambda o: o.id)
+        objects.sort(key=_id_of)
         return objects
 
     def _core_world(
@@ -1852,10 +1857,13 @@ class WorldModel:
         most probable hypothesis's objects), in id order."""
         core = self._mhf._core
         assert core is not None and isinstance(self._state, CoreState)
-        rows = core.engine.world_at(state, self._state, at, self._published, self._ids)
-        if len(rows) <= _UNPAUSED_QUERY:
+        if state.track_count <= _UNPAUSED_QUERY:
+            rows = core.engine.world_at(state, self._state, at, self._published, self._ids)
             return self._core_objects(rows, book, at, asked)
+        # the core's rows are Python values too, several containers a row: made with the
+        # collector paused as well (semwm.collector)
         with collector_paused():  # many objects made, none in a cycle
+            rows = core.engine.world_at(state, self._state, at, self._published, self._ids)
             return self._core_objects(rows, book, at, asked)
 
     def _core_objects(
@@ -1874,7 +1882,7 @@ class WorldModel:
         for lineage, existence, _, _, position, covariance, velocity, mu, shown in rows:
             if not existence >= floor:
                 continue
-            track = _ShownVersion(lineage, *shown)
+            track = _new_tuple(_ShownVersion, (lineage, *shown))  # _ShownVersion(...)
             if track.created > at + 1e-9:
                 continue
             if covered is not None and track.cls not in covered:
@@ -1894,7 +1902,7 @@ class WorldModel:
             ):
                 continue
             objects.append(obj)
-        objects.sort(key=lambda o: o.id)
+        objects.sort(key=_id_of)
         return objects
 
     def rate_report(self) -> list[StreamReport]:
@@ -1973,7 +1981,8 @@ class WorldModel:
         """An object's confidence (paper 004) at ``time``: :mod:`semwm.confidence`."""
         spec = self._knowledge.classes[track.cls]
         value = (self._book if book is None else book).at(track.lineage, time, spec)
-        return Confidence(value, state_of(value, spec))
+        # Confidence(value, state), one per object of every query
+        return made_without_init(Confidence, {"value": value, "state": state_of(value, spec)})
 
     def hypotheses(self, k: int = 10) -> list[HypothesisSummary]:
         """The ``k`` most probable hypotheses with their probabilities and objects:

@@ -138,3 +138,34 @@ def test_a_large_worlds_objects_are_made_with_the_collector_paused(engine: str) 
     with pytest.raises(RuntimeError, match="planted"):
         model.world(min_existence=1e-6)
     assert during == [False] * 5 and gc.isenabled()
+
+
+@pytest.mark.skipif(rust_core() is None, reason="the Rust core is not built")
+def test_the_cores_rows_of_a_large_world_are_made_with_the_collector_paused() -> None:
+    """The Rust engine's ``Engine.world_at`` answers a row of Python values per object
+    (several containers each): for a world of more than 64 versions it runs with the
+    collector paused too, and not for a small one."""
+    model = WorldModel(load_knowledge(shipped_knowledge_path("sim1.yaml")), engine="rust")
+    core = model._mhf._core
+    assert core is not None
+    during: list[bool] = []
+
+    class Watched:
+        def __init__(self, engine: object) -> None:
+            self.engine = engine
+
+        def world_at(self, *args: object) -> object:
+            during.append(gc.isenabled())
+            return self.engine.world_at(*args)  # type: ignore[attr-defined]
+
+        def __getattr__(self, name: str) -> object:
+            return getattr(self.engine, name)
+
+    core.engine = Watched(core.engine)  # type: ignore[assignment]
+    cups = [{"class": "Cup", "position": [0.3 * (i % 10), 0.3 * (i // 10)]} for i in range(80)]
+    model.ingest([{**cup, "time": 1.0} for cup in cups[:3]])
+    assert len(model.world(min_existence=1e-6).objects) == 3
+    assert during == [True] and gc.isenabled()
+    model.ingest([{**cup, "time": 2.0} for cup in cups])
+    assert len(model.world(min_existence=1e-6).objects) > 64
+    assert during == [True, False] and gc.isenabled()

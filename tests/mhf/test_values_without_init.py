@@ -10,10 +10,11 @@ from typing import Any
 
 import pytest
 
+from semwm.confidence import Confidence
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
 from semwm.world import IngestResult, WorldModel
-from semwm.world_types import WorldObject
+from semwm.world_types import WorldObject, WorldState
 
 
 def _batches() -> list[list[dict[str, Any]]]:
@@ -74,8 +75,29 @@ def test_world_objects_are_the_constructors_values(engine: str) -> None:
             assert got.to_dict() == expected.to_dict()
             with pytest.raises(dataclasses.FrozenInstanceError):
                 got.existence = 0.0  # type: ignore[misc]
+            confidence = got.confidence
+            assert confidence is not None and type(confidence) is Confidence
+            made = Confidence(confidence.value, confidence.state)
+            assert confidence == made and repr(confidence) == repr(made)
+            assert hash(confidence) == hash(made)
+            with pytest.raises(dataclasses.FrozenInstanceError):
+                confidence.value = 0.0  # type: ignore[misc]
             seen += 1
     assert seen >= 2
+
+
+@pytest.mark.parametrize("engine", ["rust", "python"])
+def test_a_world_state_is_the_constructors_value(engine: str) -> None:
+    model = WorldModel(load_knowledge(shipped_knowledge_path("sim2.yaml")), engine=engine)
+    for batch in _batches():
+        model.ingest(batch)
+    got = model.world(time=0.4)
+    assert type(got) is WorldState and got.objects
+    expected = WorldState(time=got.time, objects=got.objects)
+    assert got == expected and repr(got) == repr(expected)
+    assert set(vars(got)) == {field.name for field in dataclasses.fields(WorldState)}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        got.time = 0.0  # type: ignore[misc]
 
 
 def test_a_query_of_the_rust_engine_makes_no_track() -> None:
