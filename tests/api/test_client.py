@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -98,6 +99,37 @@ def test_an_answer_is_read_as_the_standard_library_reads_it() -> None:
     assert decode_json(b'{"n": %d}' % 2**70) == {"n": 2**70}
     with pytest.raises(json.JSONDecodeError):
         decode_json(b"<html>bad gateway</html>")
+
+
+def test_a_large_answer_is_read_with_the_collector_paused(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An answer over ``PAUSED_BODY`` bytes is read with the cyclic garbage collector
+    paused (by orjson and by the standard library alike), and resumed after, also when
+    the body is no JSON; a small answer is read with it running."""
+    import gc
+    import json
+
+    import semwm.client as client_module
+
+    during: list[bool] = []
+    standard = json.loads
+
+    def watched(body: bytes) -> Any:
+        during.append(gc.isenabled())
+        return standard(body)
+
+    monkeypatch.setattr(client_module.json, "loads", watched)
+    objects = [{"id": i, "position": [0.5 * i, 1.0], "existence": 0.9} for i in range(2000)]
+    large = json.dumps({"x": float("nan"), "objects": objects}).encode()  # orjson refuses NaN
+    assert len(large) > client_module.PAUSED_BODY
+    assert client_module.decode_json(large)["objects"] == objects
+    assert during == [False] and gc.isenabled()
+    assert client_module.decode_json(b'{"x": NaN}')["x"] != 0.0
+    assert during == [False, True]
+    with pytest.raises(json.JSONDecodeError):
+        client_module.decode_json(b"<" * (client_module.PAUSED_BODY + 1))
+    assert during == [False, True, False] and gc.isenabled()
 
 
 def test_a_batch_is_sent_as_the_robot_gave_it_bad_values_included(knowledge_file: Path) -> None:
