@@ -242,19 +242,10 @@ class Engine:
         at: float,
         published: Mapping[int, Any],
         ids: Mapping[int, int],
-    ) -> list[
-        tuple[
-            int,
-            float,
-            int,
-            int,
-            tuple[float, ...],
-            tuple[tuple[float, ...], ...],
-            tuple[float, ...] | None,
-            list[float],
-            tuple[str, str | None, float, float, list[float]],
-        ]
-    ]: ...
+        book: Book | None,
+        tentative_ids: int,
+        class_floor: float,
+    ) -> list[tuple[int, float, float, tuple[float, ...], dict[str, Any], float | None]]: ...
     def publish(
         self,
         state: Any,

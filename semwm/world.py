@@ -53,6 +53,7 @@ from semwm.knowledge.model import Knowledge
 from semwm.knowledge.taxonomy import Taxonomy
 from semwm.mhf import nearby
 from semwm.mhf.actions import Kick, apply_kick
+from semwm.mhf.classes import SHOWN_FLOOR
 from semwm.mhf.core_engine import CoreBook, CoreState, as_python, as_python_book, track_of
 from semwm.mhf.filter import MultipleHypothesisFilter
 from semwm.mhf.measurement import Measurement, SensorView
@@ -158,20 +159,6 @@ class _Marginal(NamedTuple):
     existence: float
     track: Track
     row: int
-
-
-class _ShownVersion(NamedTuple):
-    """What :meth:`WorldModel.world` shows of a version held in the Rust engine's core
-    besides its prediction (the last item of ``Engine.world_at``'s rows), read there so
-    that a query makes no :class:`Track` (numpy arrays) of the version: a query follows
-    almost every scan, and each scan makes new versions."""
-
-    lineage: int
-    cls: str
-    label: str | None
-    last_seen: float
-    created: float
-    class_probs: Sequence[float]
 
 
 class _LoggedScan(NamedTuple):
@@ -1785,7 +1772,8 @@ class WorldModel:
         else:
             with collector_paused():  # many objects made, none in a cycle
                 found = self._spec_world(state, book, at, asked)
-        return WorldState(time=at, objects=tuple(_unique_labels(found)))
+        # WorldState(time=at, objects=...), one per query
+        return made_without_init(WorldState, {"time": at, "objects": tuple(_unique_labels(found))})
 
     def _spec_world(
         self,
@@ -1858,50 +1846,59 @@ class WorldModel:
         core = self._mhf._core
         assert core is not None and isinstance(self._state, CoreState)
         if state.track_count <= _UNPAUSED_QUERY:
-            rows = core.engine.world_at(state, self._state, at, self._published, self._ids)
-            return self._core_objects(rows, book, at, asked)
+            return self._core_objects(core.engine, state, book, at, asked)
         # the core's rows are Python values too, several containers a row: made with the
         # collector paused as well (semwm.collector)
         with collector_paused():  # many objects made, none in a cycle
-            rows = core.engine.world_at(state, self._state, at, self._published, self._ids)
-            return self._core_objects(rows, book, at, asked)
+            return self._core_objects(core.engine, state, book, at, asked)
 
     def _core_objects(
         self,
-        rows: list[tuple[Any, ...]],
+        engine: Any,
+        state: CoreState,
         book: BookView,
         at: float,
         asked: _Asked,
     ) -> list[WorldObject]:
-        """:meth:`_core_world`'s objects of the core's rows (``Engine.world_at``), in id
-        order."""
+        """:meth:`_core_world`'s objects, in id order: each one's values as
+        :meth:`_world_object` makes them, made in the core (``Engine.world_at``) but
+        for its confidence's state; its confidence carried to ``at`` there too when the
+        core holds the book."""
+        held = book.core if type(book) is CoreBook else None
+        rows = engine.world_at(
+            state, self._state, at, self._published, self._ids, held, TENTATIVE_IDS, SHOWN_FLOOR
+        )
         floor, cls, near, label, states = asked
         covered = self.taxonomy.covers(cls) if cls is not None else None
         dim = self._knowledge.world.dimension
+        classes = self._knowledge.classes if self._mhf.mht else None
         objects = []
-        for lineage, existence, _, _, position, covariance, velocity, mu, shown in rows:
-            if not existence >= floor:
+        for lineage, existence, created, position, fields, value in rows:
+            if not existence >= floor or created > at + 1e-9:
                 continue
-            track = _new_tuple(_ShownVersion, (lineage, *shown))  # _ShownVersion(...)
-            if track.created > at + 1e-9:
+            if covered is not None and fields["cls"] not in covered:
                 continue
-            if covered is not None and track.cls not in covered:
-                continue
-            if label is not None and track.label != label:
+            if label is not None and fields["label"] != label:
                 continue
             if (
                 near is not None
                 and float(np.linalg.norm(np.asarray(position) - np.asarray(near[:dim]))) > near[dim]
             ):
                 continue
-            obj = self._world_object(
-                track, existence, at, (position, covariance), velocity, mu, book
-            )
-            if states is not None and (
-                obj.confidence is None or obj.confidence.state not in states
-            ):
+            if classes is not None:  # mht: the confidence (confidence_of)
+                spec = classes[fields["cls"]]
+                if value is None:  # a book the core does not hold
+                    value = book.at(lineage, at, spec)
+                state_now = state_of(value, spec)
+                if states is not None and state_now not in states:
+                    continue
+                # Confidence(value, state_now)
+                fields["confidence"] = made_without_init(
+                    Confidence, {"value": value, "state": state_now}
+                )
+            elif states is not None:  # paper: no confidence, so none in a state asked for
                 continue
-            objects.append(obj)
+            objects.append(made_without_init(WorldObject, fields))  # WorldObject(**fields)
         objects.sort(key=_id_of)
         return objects
 
@@ -1929,7 +1926,7 @@ class WorldModel:
 
     def _world_object(
         self,
-        track: Track | _ShownVersion,
+        track: Track,
         existence: float,
         at: float,
         position: tuple[tuple[float, ...], tuple[tuple[float, ...], ...]],
@@ -1975,9 +1972,7 @@ class WorldModel:
             },
         )
 
-    def confidence_of(
-        self, track: Track | _ShownVersion, time: float, book: BookView | None = None
-    ) -> Confidence:
+    def confidence_of(self, track: Track, time: float, book: BookView | None = None) -> Confidence:
         """An object's confidence (paper 004) at ``time``: :mod:`semwm.confidence`."""
         spec = self._knowledge.classes[track.cls]
         value = (self._book if book is None else book).at(track.lineage, time, spec)

@@ -40,6 +40,10 @@ from semwm.knowledge.taxonomy import Taxonomy
 PUBLISH_MASS = 0.5
 """A class is published when its subtree holds more than this probability."""
 
+SHOWN_FLOOR = 1e-3
+"""An object's ``class_probabilities`` leave out the classes below this probability
+(:meth:`ClassModel.as_dict`; the Rust engine's ``Engine.world_at`` is given it)."""
+
 
 def in_order_product(a: FloatArray, b: FloatArray) -> FloatArray:
     """``a @ b.T`` (``(N, K)`` and ``(M, K)`` to ``(N, M)``) with each entry summed over
@@ -131,7 +135,7 @@ class ClassModel:
         return chosen
 
     def as_dict(
-        self, probabilities: FloatArray | Sequence[float], floor: float = 1e-3
+        self, probabilities: FloatArray | Sequence[float], floor: float = SHOWN_FLOOR
     ) -> dict[str, float]:
         """The distribution as ``{class: probability}``, classes below ``floor`` left out."""
         names = self.names

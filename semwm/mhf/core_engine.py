@@ -67,6 +67,8 @@ def tables(mhf: MultipleHypothesisFilter) -> dict[str, Any]:
                 "filter": rust.class_filter(flt),
                 "initial_covariance": flt.initial_covariance.ravel().tolist(),
                 "initial_mode_probabilities": flt.initial_mode_probabilities.tolist(),
+                # what a query shows (WorldModel._world_object), not the filter's tables
+                "mode_names": list(flt.mode_names) if flt.modes > 1 else None,
                 "detection_frequency": float(spec.detection_frequency),
                 "detection_probability": float(spec.detection_probability),
                 "leave_frequency": float(spec.leave_frequency),

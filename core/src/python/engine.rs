@@ -16,6 +16,7 @@ use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
+use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyString, PyTuple};
 
@@ -273,31 +274,36 @@ pub struct PyEngine {
     /// the class names as Python strings, by index (each `VersionRef` shares its class's,
     /// each scan's published table the list)
     names: Arc<[Py<PyString>]>,
+    /// each class's mode names as Python strings, by index: `None` for a filter of one
+    /// mode (whose objects show no mode probabilities)
+    mode_names: Vec<Option<Vec<Py<PyString>>>>,
     /// the versions' summaries the last published world used (`world::Summaries`)
     summaries: Arc<Mutex<Summaries>>,
 }
 
-/// One object of `Engine.world_at`.
+/// One object of `Engine.world_at`: `(lineage, existence, created, position, fields,
+/// confidence)`, `fields` a `WorldObject`'s.
 type WorldRow<'py> = (
     u64,
     f64,
-    u64,
-    u64,
+    f64,
     Bound<'py, PyTuple>,
-    Bound<'py, PyTuple>,
-    Option<Bound<'py, PyTuple>>,
-    Vec<f64>,
-    ShownVersion<'py>,
+    Bound<'py, PyDict>,
+    Option<f64>,
 );
 
-/// What `WorldModel.world` shows of an object's version besides its prediction:
-/// `(class, label, last_seen, created, class_probabilities)`.
-type ShownVersion<'py> = (
-    Bound<'py, PyString>,
-    Option<Bound<'py, PyString>>,
-    f64,
-    f64,
+/// What `Engine.world_at` computes of one object with the GIL released: its marginal,
+/// its id (`None`: tentative), its prediction (position, covariance, velocity, mode
+/// probabilities), its version and its confidence carried to the query's time.
+type WorldValues = (
+    crate::world::Marginal,
+    Option<i64>,
     Vec<f64>,
+    Vec<f64>,
+    Option<Vec<f64>>,
+    Vec<f64>,
+    Arc<Version>,
+    Option<f64>,
 );
 
 /// A version of a core state, named without making its Python value
@@ -748,11 +754,29 @@ impl PyEngine {
             .iter()
             .map(|c| PyString::new(tables_py.py(), &c.name).unbind())
             .collect();
+        // display values, not the filter's tables: each class's mode names when it has
+        // several (`semwm/mhf/core_engine.py: tables`)
+        let mode_names = items(tables_py, "classes")?
+            .iter()
+            .map(|class| {
+                let names: Option<Vec<String>> = match class.get_item("mode_names")? {
+                    None => None,
+                    Some(names) => names.extract()?,
+                };
+                Ok(names.map(|names| {
+                    names
+                        .iter()
+                        .map(|name| PyString::new(tables_py.py(), name).unbind())
+                        .collect()
+                }))
+            })
+            .collect::<PyResult<Vec<_>>>()?;
         Ok(PyEngine {
             filter: Arc::new(filter),
             classes,
             detectors,
             names,
+            mode_names,
             summaries: Arc::default(),
         })
     }
@@ -791,15 +815,19 @@ impl PyEngine {
     }
 
     /// The world of `state` (a `CoreState`) predicted to `at` (`WorldModel.world`'s
-    /// `_marginals` and, `mht`, `_same_objects`; `crate::world::at`): one row per
-    /// physical object, `(lineage, existence, key, serial, position, covariance,
-    /// velocity, mode_probabilities, shown)` in the specification's order, the position
-    /// and its covariance as tuples (`velocity` `None` for a filter without one), `shown`
-    /// the version's `(class, label, last_seen, created, class_probabilities)` (so that
-    /// a query makes no `Track` of the version). `latest`
+    /// `_marginals` and, `mht`, `_same_objects`; `crate::world::at`), one row per
+    /// physical object in the specification's order: `(lineage, existence, created,
+    /// position, fields, confidence)`, `fields` the values of its `WorldObject`
+    /// (`WorldModel._world_object`: its id, or `tentative_ids + 1 + lineage` for a
+    /// lineage without one, the version's class, label and times, the prediction as
+    /// tuples, mode probabilities by name for a filter of several modes, class
+    /// probabilities of at least `class_floor` by name under `mht`) with `confidence`
+    /// `None`, and `confidence` the lineage's value in `book` carried to `at`
+    /// (`semwm.confidence.carried`; `None` without a book or under `paper`). `latest`
     /// is the model's latest state (a `CoreState`: its most probable hypothesis decides
     /// which lineages are distinct), `published` the objects shown now and `ids` their
     /// ids, as `Engine.current` takes them.
+    #[allow(clippy::too_many_arguments)]
     fn world_at<'py>(
         &self,
         state: &Bound<'py, PyAny>,
@@ -807,6 +835,9 @@ impl PyEngine {
         at: f64,
         published: &Bound<'py, PyAny>,
         ids: &Bound<'py, PyDict>,
+        book: Option<&PyBook>,
+        tentative_ids: i64,
+        class_floor: f64,
     ) -> PyResult<Vec<WorldRow<'py>>> {
         let py = state.py();
         let shown: KeySet<u64> = published_lineages(published)?.into_iter().collect();
@@ -822,49 +853,46 @@ impl PyEngine {
             .state
             .clone();
         let filter = self.filter.clone();
+        let book = book
+            .filter(|_| filter.tables.mht)
+            .map(|book| book.book.clone());
         let d = filter.tables.dim;
-        let rows = run(py, "Engine.world_at", move || {
+        let values = run(py, "Engine.world_at", move || {
             let best = crate::world::best_keys(&newest);
             let (predicted, marginals) = crate::world::at(&filter, &held, at, &best, &shown, &ids)?;
             Ok(marginals
                 .into_iter()
-                .map(|(m, row)| {
-                    let entry = &held.tracks[&m.key];
+                .map(|(m, row)| -> WorldValues {
+                    let version = held.tracks[&m.key].version.clone();
                     let predicted_row = &predicted.rows[row];
                     let mean = &predicted_row.mean;
                     let velocity =
                         (mean.len() > d).then(|| mean[d..(2 * d).min(mean.len())].to_vec());
+                    // semwm.confidence.carried: 1 for a lineage the book does not hold
+                    let decay = filter.tables.classes[version.cls].confidence_decay;
+                    let confidence = book.as_ref().map(|book| match book.values.get(&m.lineage) {
+                        None => 1.0,
+                        Some(&(value, since)) => value * (-decay * (at - since).max(0.0)).exp(),
+                    });
                     (
-                        (m.lineage, m.existence, m.key, entry.serial),
+                        m.clone(),
+                        ids.get(&m.lineage).copied(),
                         predicted.position(row).to_vec(),
                         predicted.covariance(row).to_vec(),
                         velocity,
                         predicted_row.mu().to_vec(),
-                        entry.version.clone(),
+                        version,
+                        confidence,
                     )
                 })
                 .collect::<Vec<_>>())
         })?;
-        rows.into_iter()
+        let mht = self.filter.tables.mht;
+        values
+            .into_iter()
             .map(
-                |(
-                    (lineage, existence, key, serial),
-                    position,
-                    covariance,
-                    velocity,
-                    mu,
-                    version,
-                )| {
-                    let shown = (
-                        self.names[version.cls].bind(py).clone(),
-                        version
-                            .label
-                            .as_deref()
-                            .map(|label| PyString::new(py, label)),
-                        version.last_seen,
-                        version.created,
-                        version.class_probs.to_vec(),
-                    );
+                |(m, id, position, covariance, velocity, mu, version, confidence)| {
+                    let position = PyTuple::new(py, position)?;
                     let covariance = PyTuple::new(
                         py,
                         covariance
@@ -873,16 +901,57 @@ impl PyEngine {
                             .collect::<PyResult<Vec<_>>>()?,
                     )?;
                     let velocity = velocity.map(|v| PyTuple::new(py, v)).transpose()?;
+                    let modes = match &self.mode_names[version.cls] {
+                        None => None,
+                        Some(names) if names.len() != mu.len() => {
+                            return Err(PyValueError::new_err(format!(
+                                "{} mode probabilities for {} modes",
+                                mu.len(),
+                                names.len()
+                            )))
+                        }
+                        Some(names) => {
+                            let modes = PyDict::new(py);
+                            for (name, p) in names.iter().zip(&mu) {
+                                modes.set_item(name.bind(py), p)?;
+                            }
+                            Some(modes)
+                        }
+                    };
+                    let class_probabilities = if mht {
+                        let probabilities = PyDict::new(py);
+                        for (name, &p) in self.names.iter().zip(version.class_probs.iter()) {
+                            if p >= class_floor {
+                                probabilities.set_item(name.bind(py), p)?;
+                            }
+                        }
+                        Some(probabilities)
+                    } else {
+                        None
+                    };
+                    let fields = PyDict::new(py);
+                    let tentative = id.is_none();
+                    let id = id.unwrap_or(tentative_ids + 1 + m.lineage as i64);
+                    fields.set_item(intern!(py, "id"), id)?;
+                    fields.set_item(intern!(py, "cls"), self.names[version.cls].bind(py))?;
+                    fields.set_item(intern!(py, "label"), version.label.as_deref())?;
+                    fields.set_item(intern!(py, "position"), &position)?;
+                    fields.set_item(intern!(py, "velocity"), velocity)?;
+                    fields.set_item(intern!(py, "covariance"), covariance)?;
+                    fields.set_item(intern!(py, "existence"), m.existence.min(1.0))?;
+                    fields.set_item(intern!(py, "last_seen"), version.last_seen)?;
+                    fields.set_item(intern!(py, "created"), version.created)?;
+                    fields.set_item(intern!(py, "mode_probabilities"), modes)?;
+                    fields.set_item(intern!(py, "class_probabilities"), class_probabilities)?;
+                    fields.set_item(intern!(py, "confidence"), py.None())?;
+                    fields.set_item(intern!(py, "tentative"), tentative)?;
                     Ok((
-                        lineage,
-                        existence,
-                        key,
-                        serial,
-                        PyTuple::new(py, position)?,
-                        covariance,
-                        velocity,
-                        mu,
-                        shown,
+                        m.lineage,
+                        m.existence,
+                        version.created,
+                        position,
+                        fields,
+                        confidence,
                     ))
                 },
             )
