@@ -27,7 +27,10 @@ One command measures every row of issue 29's speed table, with the Python engine
 The runs are interleaved: Python engine, Rust engine, Stone Soup JPDA, and again,
 ``--repeats`` times, so that all three see the same load on a shared machine; each
 figure is the best of the repeats (the run least disturbed by other load; for det/s
-the highest). Compare the ratios, measured side by side, rather than absolute times
+the highest). Each scenario run (the room, RoboCup, the long match) starts after
+``gc.collect()``, every tracker's alike: the cyclic collector then collects, during the
+run, what the run itself leaves, not what the sections before it left (the collector
+stays on). Compare the ratios, measured side by side, rather than absolute times
 across days.
 
 Then, once per engine and not timed: memory (``tracemalloc``'s peak over 3 frames of
@@ -56,6 +59,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import gc
 import io
 import math
 import pstats
@@ -169,6 +173,10 @@ def _timed_run(
     from semwm.world import WorldModel
 
     scenario, knowledge = _scenario(name, sizes)
+    # a run starts with nothing left to collect: without it, the collections of what the
+    # sections before it left landed in its ingest calls (the room: 9.2-12.5 us per
+    # detection over six runs of one commit, 9.3-9.7 with it)
+    gc.collect()
     if tracker in ENGINES:
         WorldModel(knowledge, engine=tracker)  # lazy imports outside the measured calls
 
@@ -728,6 +736,8 @@ def run(quick: bool, repeats: int) -> dict[str, Any]:
             "every tracker).",
             "Runs interleaved: Python engine, Rust engine, Stone Soup JPDA, repeated; each "
             "figure is the best of the repeats (the run least disturbed by other load).",
+            "Each scenario run (the room, RoboCup, the long match) starts after "
+            "gc.collect(), every tracker's alike; the collector stays on during the run.",
             "Batches over HTTP: semwm serve --engine E (started once per engine, through "
             "bench_http.py --serve: its world model's parts timed), one keep-alive client, "
             "wall det/s at the client (its JSON included).",
@@ -1007,9 +1017,9 @@ def markdown(doc: dict[str, Any]) -> str:
             "table: the benchmark's runner, the figure the target is judged by (the "
             "knowledge loaded afresh for each run, each ingest timed with process_time, "
             "the world queried at each truth frame and kept, the runs interleaved with the "
-            "other trackers'). The difference is what the runner's setting adds to the "
-            "scans' own cost (benchmarks/README.md, \"Issue 29's speed targets, as "
-            'measured", splits it).',
+            "other trackers', each after gc.collect()). The difference is what the "
+            "runner's setting adds to the scans' own cost (benchmarks/README.md, "
+            '"Issue 29\'s speed targets, as measured", splits it).',
             "",
             "| engine | detections | scans alone | the table |",
             "|---|---|---|---|",
