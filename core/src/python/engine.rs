@@ -15,7 +15,7 @@ use litemap::LiteMap;
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods,
 };
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyOverflowError, PyValueError};
 use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyString, PyTuple};
@@ -931,7 +931,18 @@ impl PyEngine {
                     };
                     let fields = PyDict::new(py);
                     let tentative = id.is_none();
-                    let id = id.unwrap_or(tentative_ids + 1 + m.lineage as i64);
+                    let id = match id {
+                        Some(id) => id,
+                        None => i64::try_from(m.lineage)
+                            .ok()
+                            .and_then(|lineage| tentative_ids.checked_add(1)?.checked_add(lineage))
+                            .ok_or_else(|| {
+                                PyOverflowError::new_err(format!(
+                                    "the tentative id of lineage {} is beyond 64 bits",
+                                    m.lineage
+                                ))
+                            })?,
+                    };
                     fields.set_item(intern!(py, "id"), id)?;
                     fields.set_item(intern!(py, "cls"), self.names[version.cls].bind(py))?;
                     fields.set_item(intern!(py, "label"), version.label.as_deref())?;
