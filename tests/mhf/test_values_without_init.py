@@ -10,10 +10,12 @@ from typing import Any
 
 import pytest
 
-from semwm.confidence import Confidence
+from semwm.confidence import Confidence, ConfidenceBook
+from semwm.filters.engine import rust_core
 from semwm.knowledge.loader import load_knowledge
 from semwm.knowledge.shipped import shipped_knowledge_path
-from semwm.world import IngestResult, WorldModel
+from semwm.mhf.core_engine import CoreBook, CoreState, as_python_book
+from semwm.world import IngestResult, WorldModel, _Asked
 from semwm.world_types import WorldObject, WorldState
 
 
@@ -111,3 +113,23 @@ def test_a_query_of_the_rust_engine_makes_no_track() -> None:
     made = dict(core._made.tracks)
     objects = model.world(time=0.5, min_existence=1e-6).objects
     assert objects and core._made.tracks == made
+
+
+@pytest.mark.skipif(rust_core() is None, reason="the Rust core is not built")
+def test_a_query_reads_the_confidences_of_a_book_the_core_does_not_hold() -> None:
+    """The core carries each object's confidence to the query's time when it holds the
+    book (``Engine.world_at``); from the specification's book the query reads it in
+    Python (``BookView.at``): the same objects either way."""
+    model = WorldModel(load_knowledge(shipped_knowledge_path("sim2.yaml")), engine="rust")
+    for batch in _batches():
+        model.ingest(batch)
+    core = model._mhf._core
+    state, book = model._state, model._book
+    assert core is not None and type(state) is CoreState and type(book) is CoreBook
+    asked = _Asked(1e-6, None, None, None, None)
+    held = model._core_objects(core.engine, state, book, 0.9, asked)
+    read = model._core_objects(core.engine, state, as_python_book(book), 0.9, asked)
+    assert type(as_python_book(book)) is ConfidenceBook
+    assert len(held) >= 2 and read == held
+    values = [obj.confidence.value for obj in held if obj.confidence is not None]
+    assert len(values) == len(held) and min(values) < 1.0  # carried: decayed since seen
